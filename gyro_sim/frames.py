@@ -1,0 +1,114 @@
+"""Frames, quaternions and the Euler angles of the body in the kinetic-moment frame.
+
+Conventions (physics.md §1):
+
+* Case frame Z (inertial, stator housing) with unit vectors z1, z2, z3.
+* Body frame X: principal axes, x3 the polar axis.
+* Attitude quaternion ``q = (w, x, y, z)`` maps body to case coordinates:
+  ``v_case = R(q) v_body``.
+* Kinetic-moment frame Y: y3 = L/|L|; with ρ the polar angle of L from z3 and σ
+  its azimuth, y1 = (cosρ cosσ, cosρ sinσ, −sinρ), y2 = (−sinσ, cosσ, 0).
+* Euler angles (z-x-z) of the body in Y: R = Y Rz(ψ) Rx(θ) Rz(φ) ([M] (2.2)),
+  so that L_b = |L| (sinθ sinφ, sinθ cosφ, cosθ). They are outputs only:
+  singular at θ = 0, π and never integrated.
+
+Vectorised NumPy functions take arrays with the vector index last.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3), body → case, of unit quaternions q (..., 4) = (w, x, y, z)."""
+    q = np.asarray(q, dtype=float)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) with w ≥ 0 of a single rotation matrix (Shepperd's method)."""
+    R = np.asarray(R, dtype=float)
+    tr = np.trace(R)
+    cands = np.array([tr, R[0, 0], R[1, 1], R[2, 2]])
+    i = int(np.argmax(cands))
+    if i == 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+    elif i == 1:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = np.array([(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s])
+    elif i == 2:
+        s = 2.0 * np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
+        q = np.array([(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s])
+    else:
+        s = 2.0 * np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
+        q = np.array([(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s])
+    if q[0] < 0:
+        q = -q
+    return q / np.linalg.norm(q)
+
+
+def rot_x(a: float) -> np.ndarray:
+    """Rotation matrix about x by angle a (rad)."""
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(a: float) -> np.ndarray:
+    """Rotation matrix about y by angle a (rad)."""
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(a: float) -> np.ndarray:
+    """Rotation matrix about z by angle a (rad)."""
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def l_frame(L: np.ndarray) -> np.ndarray:
+    """Kinetic-moment frame Y (..., 3, 3), columns y1, y2, y3, of case-frame L (..., 3).
+
+    Where L = 0 the frame of L ∥ z3 (Y = I) is returned; where L ∥ ±z3 the azimuth σ is 0.
+    """
+    L = np.asarray(L, dtype=float)
+    Lx, Ly, Lz = np.moveaxis(L, -1, 0)
+    rho = np.arctan2(np.hypot(Lx, Ly), Lz)
+    sig = np.arctan2(Ly, Lx)
+    cr, sr, cs, ss = np.cos(rho), np.sin(rho), np.cos(sig), np.sin(sig)
+    Y = np.empty(L.shape[:-1] + (3, 3))
+    Y[..., 0, 0], Y[..., 1, 0], Y[..., 2, 0] = cr * cs, cr * ss, -sr
+    Y[..., 0, 1], Y[..., 1, 1], Y[..., 2, 1] = -ss, cs, 0.0
+    Y[..., 0, 2], Y[..., 1, 2], Y[..., 2, 2] = sr * cs, sr * ss, cr
+    return Y
+
+
+def euler_angles(R: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """Euler angles (..., 3) = (ψ, θ, φ) in rad of the body (R body → case) in the L-frame.
+
+    M = Yᵀ R = Rz(ψ) Rx(θ) Rz(φ): θ = atan2(√(M13² + M23²), M33), ψ = atan2(M13, −M23),
+    φ = atan2(M31, M32). ψ and φ are meaningless where θ = 0 or π.
+    """
+    Y = l_frame(L)
+    M = np.swapaxes(Y, -1, -2) @ R
+    theta = np.arctan2(np.hypot(M[..., 0, 2], M[..., 1, 2]), M[..., 2, 2])
+    psi = np.arctan2(M[..., 0, 2], -M[..., 1, 2])
+    phi = np.arctan2(M[..., 2, 0], M[..., 2, 1])
+    return np.stack([psi, theta, phi], axis=-1)
+
+
+def attitude_from_euler(L_direction: np.ndarray, psi: float, theta: float, phi: float) -> np.ndarray:
+    """Quaternion (body → case) of the body at Euler angles (ψ, θ, φ) in the L-frame of a direction."""
+    Y = l_frame(np.asarray(L_direction, dtype=float))
+    return matrix_to_quat(Y @ rot_z(psi) @ rot_x(theta) @ rot_z(phi))

@@ -1,0 +1,378 @@
+"""Compiled kernels of the full model: right-hand side and steppers (numba, no Python objects).
+
+State vector ``y`` (all SI):
+
+* ``y[0:3]``  L, kinetic moment in the case frame (N·m·s)
+* ``y[3:7]``  q = (w, x, y, z), attitude quaternion body → case
+* ``y[7+3n : 10+3n]``  e_n, the n-th eddy mode in the body frame (T): the induced moment is
+  m_b = c (Σ_n w_n e_n − T_tail dB_b/dt),  c = 2π r2³/μ0 (physics.md §3).
+
+Each eddy mode is the first-order filter of [M] (2.15) written for its moment:
+τ_n ė_n + e_n = −τ_n dB_b/dt, so that e_n = ĝ_n(ω) B_b with ĝ_n = iωτ_n/(1 − iωτ_n) and the sum
+over n is the modal form of [M] (2.14) (or of the corrected (2.13)). The quasi-static torque
+[K] (1.2) is the case with no modes and T_tail = τ_eff.
+
+Field: B(t) = Σ_p [Bre_p cos(ω_p s) + Bim_p sin(ω_p s)], s = t − t_seg (case frame, T).
+
+Steppers:
+
+* :func:`integrate_etd` — exponential RK4 (Cox & Matthews 2002, ETDRK4) on the whole state:
+  the stiff linear parts −e_n/τ_n are integrated exactly (φ-functions), so short τ_n never
+  force short steps; the other components see classical RK4. The quaternion is normalised
+  after each step.
+* :func:`integrate_free` — the torque-free rotor, geometric: H = |L|²/(2J_ref) + H_r; the first
+  flow is an exact rotation about the fixed L, the second an exact rotation about the body axis
+  of symmetry (axisymmetric body: the step is exact) or, for a triaxial body, the Lie–Poisson
+  implicit midpoint rule (Cayley update) composed to 4th order. Both sub-flows keep L (case)
+  and the kinetic energy to round-off; the two flows commute.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# ----------------------------------------------------------------------------------------
+# small vector/quaternion helpers
+
+
+@njit(cache=True, inline="always")
+def _rot_body_to_case(q, v, out):
+    """out = R(q) v."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    vx, vy, vz = v[0], v[1], v[2]
+    # t = 2 (qv × v); v' = v + w t + qv × t
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    out[0] = vx + w * tx + (y * tz - z * ty)
+    out[1] = vy + w * ty + (z * tx - x * tz)
+    out[2] = vz + w * tz + (x * ty - y * tx)
+
+
+@njit(cache=True, inline="always")
+def _rot_case_to_body(q, v, out):
+    """out = R(q)ᵀ v."""
+    w, x, y, z = q[0], -q[1], -q[2], -q[3]
+    vx, vy, vz = v[0], v[1], v[2]
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    out[0] = vx + w * tx + (y * tz - z * ty)
+    out[1] = vy + w * ty + (z * tx - x * tz)
+    out[2] = vz + w * tz + (x * ty - y * tx)
+
+
+@njit(cache=True, inline="always")
+def _qmul(a0, a1, a2, a3, b0, b1, b2, b3, out):
+    out[0] = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+    out[1] = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+    out[2] = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+    out[3] = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+
+
+@njit(cache=True)
+def _normalize_q(y):
+    n = math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+    for i in range(3, 7):
+        y[i] /= n
+
+
+# ----------------------------------------------------------------------------------------
+# fields and the right-hand side
+
+
+@njit(cache=True)
+def field_case(s, Bre, Bim, om, B, dB):
+    """B(s) and dB/ds in the case frame (T, T/s) of a segment's phasors at s = t − t_seg."""
+    B[0] = B[1] = B[2] = 0.0
+    dB[0] = dB[1] = dB[2] = 0.0
+    for p in range(om.shape[0]):
+        c = math.cos(om[p] * s)
+        sn = math.sin(om[p] * s)
+        for j in range(3):
+            B[j] += Bre[p, j] * c + Bim[p, j] * sn
+            dB[j] += om[p] * (Bim[p, j] * c - Bre[p, j] * sn)
+
+
+@njit(cache=True)
+def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
+    """F = right-hand side of the state without the linear mode decay −e_n/τ_n.
+
+    F[0:3] = N (case, N·m) = (R m_b) × B  with m_b = c (Σ w_n e_n − T_tail dB_b/dt)   [physics.md §3]
+    F[3:7] = ½ q ⊗ (0, Ω_b),  Ω_b = J⁻¹ Rᵀ L
+    F[7+3n+j] = −(dB_b/dt)_j,  dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
+    ``work`` is scratch space of length ≥ 21.
+    """
+    q = y[3:7]
+    B = work[0:3]
+    dB = work[3:6]
+    Bb = work[6:9]
+    dBb = work[9:12]
+    Lb = work[12:15]
+    mb = work[15:18]
+    mc = work[18:21]
+    field_case(s, Bre, Bim, om, B, dB)
+    _rot_case_to_body(q, y[0:3], Lb)
+    Ox = Jinv[0] * Lb[0]
+    Oy = Jinv[1] * Lb[1]
+    Oz = Jinv[2] * Lb[2]
+    # quaternion kinematics
+    F[3] = -0.5 * (q[1] * Ox + q[2] * Oy + q[3] * Oz)
+    F[4] = 0.5 * (q[0] * Ox + q[2] * Oz - q[3] * Oy)
+    F[5] = 0.5 * (q[0] * Oy + q[3] * Ox - q[1] * Oz)
+    F[6] = 0.5 * (q[0] * Oz + q[1] * Oy - q[2] * Ox)
+    if c_m == 0.0:
+        F[0] = F[1] = F[2] = 0.0
+        for i in range(7, F.shape[0]):
+            F[i] = 0.0
+        return
+    _rot_case_to_body(q, B, Bb)
+    _rot_case_to_body(q, dB, dBb)
+    # dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
+    dBb[0] -= Oy * Bb[2] - Oz * Bb[1]
+    dBb[1] -= Oz * Bb[0] - Ox * Bb[2]
+    dBb[2] -= Ox * Bb[1] - Oy * Bb[0]
+    mb[0] = -tail * dBb[0]
+    mb[1] = -tail * dBb[1]
+    mb[2] = -tail * dBb[2]
+    for n in range(nm):
+        k = 7 + 3 * n
+        mb[0] += w[n] * y[k]
+        mb[1] += w[n] * y[k + 1]
+        mb[2] += w[n] * y[k + 2]
+        F[k] = -dBb[0]
+        F[k + 1] = -dBb[1]
+        F[k + 2] = -dBb[2]
+    mb[0] *= c_m
+    mb[1] *= c_m
+    mb[2] *= c_m
+    _rot_body_to_case(q, mb, mc)
+    # N = m × B (case frame)
+    F[0] = mc[1] * B[2] - mc[2] * B[1]
+    F[1] = mc[2] * B[0] - mc[0] * B[2]
+    F[2] = mc[0] * B[1] - mc[1] * B[0]
+
+
+# ----------------------------------------------------------------------------------------
+# exponential RK4
+
+
+@njit(cache=True)
+def _phi123(z):
+    """φ1, φ2, φ3 of a real z (stable near 0): φ_k(z) = Σ_j z^j/(j+k)!."""
+    if abs(z) < 0.5:
+        p1 = 0.0
+        p2 = 0.0
+        p3 = 0.0
+        term = 1.0  # z^j / j!
+        for j in range(20):
+            p1 += term / (j + 1)
+            p2 += term / ((j + 1) * (j + 2))
+            p3 += term / ((j + 1) * (j + 2) * (j + 3))
+            term *= z / (j + 1)
+        return p1, p2, p3
+    ez = math.exp(z)
+    p1 = (ez - 1.0) / z
+    p2 = (ez - 1.0 - z) / (z * z)
+    p3 = (ez - 1.0 - z - 0.5 * z * z) / (z * z * z)
+    return p1, p2, p3
+
+
+@njit(cache=True)
+def etd_coefficients(lam, h, E, E2, Q, A1, A2, A3):
+    """ETDRK4 coefficients of Cox & Matthews (2002) for linear rates ``lam`` and step ``h``."""
+    for i in range(lam.shape[0]):
+        z = lam[i] * h
+        E[i] = math.exp(z)
+        E2[i] = math.exp(0.5 * z)
+        p1h, _, _ = _phi123(0.5 * z)
+        Q[i] = 0.5 * h * p1h
+        p1, p2, p3 = _phi123(z)
+        A1[i] = h * (p1 - 3.0 * p2 + 4.0 * p3)
+        A2[i] = h * 2.0 * (p2 - 2.0 * p3)
+        A3[i] = h * (-p2 + 4.0 * p3)
+
+
+@njit(cache=True)
+def etd_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work):
+    """One ETDRK4 step of length h from segment time s (in place on y)."""
+    n = y.shape[0]
+    Nu = buf[0]
+    Na = buf[1]
+    Nb = buf[2]
+    Nc = buf[3]
+    a = buf[4]
+    b = buf[5]
+    cc = buf[6]
+    nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work)
+    for i in range(n):
+        a[i] = E2[i] * y[i] + Q[i] * Nu[i]
+    nonlinear_part(s + 0.5 * h, a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work)
+    for i in range(n):
+        b[i] = E2[i] * y[i] + Q[i] * Na[i]
+    nonlinear_part(s + 0.5 * h, b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work)
+    for i in range(n):
+        cc[i] = E2[i] * a[i] + Q[i] * (2.0 * Nb[i] - Nu[i])
+    nonlinear_part(s + h, cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work)
+    for i in range(n):
+        y[i] = E[i] * y[i] + A1[i] * Nu[i] + A2[i] * (Na[i] + Nb[i]) + A3[i] * Nc[i]
+    _normalize_q(y)
+
+
+@njit(cache=True)
+def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
+                  out_y, out_N, k_out):
+    """Integrate y from t0 through each time in ``t_stops`` (increasing) with ETDRK4.
+
+    Each interval between stops is split into equal steps no longer than ``h_max``. Where
+    ``record[i]`` the state and the torque (case, N·m) at ``t_stops[i]`` are written to
+    ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns (k_out, steps).
+    """
+    n = y.shape[0]
+    nm = (n - 7) // 3
+    buf = np.empty((7, n))
+    work = np.empty(24)
+    E = np.empty(n)
+    E2 = np.empty(n)
+    Q = np.empty(n)
+    A1 = np.empty(n)
+    A2 = np.empty(n)
+    A3 = np.empty(n)
+    h_last = -1.0
+    steps = 0
+    t = t0
+    for i in range(t_stops.shape[0]):
+        span = t_stops[i] - t
+        if span > 0.0:
+            k = int(math.ceil(span / h_max * (1.0 - 1e-12)))
+            if k < 1:
+                k = 1
+            h = span / k
+            if h != h_last:
+                etd_coefficients(lam, h, E, E2, Q, A1, A2, A3)
+                h_last = h
+            for j in range(k):
+                etd_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
+                         E, E2, Q, A1, A2, A3, buf, work)
+            steps += k
+            t = t_stops[i]
+        if record[i]:
+            out_y[k_out, :] = y
+            nonlinear_part(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, buf[0], work)
+            out_N[k_out, 0] = buf[0, 0]
+            out_N[k_out, 1] = buf[0, 1]
+            out_N[k_out, 2] = buf[0, 2]
+            k_out += 1
+    return k_out, steps
+
+
+# ----------------------------------------------------------------------------------------
+# geometric torque-free stepper
+
+
+@njit(cache=True)
+def _free_body_step(y, h, Jinv, inv_ref, axis, tmp):
+    """Body flow of H_r = ½ Σ (1/J_i − 1/J_ref) L_i² over h (right multiplication of q)."""
+    q = y[3:7]
+    Lb = tmp[0:3]
+    _rot_case_to_body(q, y[0:3], Lb)
+    if axis >= 0:
+        # only one body axis carries H_r: L_b[axis] is constant, the flow is an exact rotation
+        beta = h * (Jinv[axis] - inv_ref) * Lb[axis]
+        c = math.cos(0.5 * beta)
+        sn = math.sin(0.5 * beta)
+        r1 = sn if axis == 0 else 0.0
+        r2 = sn if axis == 1 else 0.0
+        r3 = sn if axis == 2 else 0.0
+        _qmul(q[0], q[1], q[2], q[3], c, r1, r2, r3, tmp[3:7])
+    else:
+        # Lie–Poisson implicit midpoint: L_m = L_b + (h/2) L_m × Ω_r(L_m); q ← q ⊗ cay(h Ω_r(L_m))
+        m0, m1, m2 = Lb[0], Lb[1], Lb[2]
+        d0 = Jinv[0] - inv_ref
+        d1 = Jinv[1] - inv_ref
+        d2 = Jinv[2] - inv_ref
+        scale = abs(m0) + abs(m1) + abs(m2) + 1e-300
+        for _ in range(100):
+            o0, o1, o2 = d0 * m0, d1 * m1, d2 * m2
+            n0 = Lb[0] + 0.5 * h * (m1 * o2 - m2 * o1)
+            n1 = Lb[1] + 0.5 * h * (m2 * o0 - m0 * o2)
+            n2 = Lb[2] + 0.5 * h * (m0 * o1 - m1 * o0)
+            diff = abs(n0 - m0) + abs(n1 - m1) + abs(n2 - m2)
+            m0, m1, m2 = n0, n1, n2
+            if diff <= 1e-16 * scale:
+                break
+        v0 = 0.5 * h * d0 * m0
+        v1 = 0.5 * h * d1 * m1
+        v2 = 0.5 * h * d2 * m2
+        nrm = 1.0 / math.sqrt(1.0 + v0 * v0 + v1 * v1 + v2 * v2)
+        _qmul(q[0], q[1], q[2], q[3], nrm, v0 * nrm, v1 * nrm, v2 * nrm, tmp[3:7])
+    for i in range(4):
+        y[3 + i] = tmp[3 + i]
+
+
+@njit(cache=True)
+def _free_case_rotation(y, h, inv_ref, tmp):
+    """Flow of |L|²/(2 J_ref): rotation of the body about the fixed case-frame L at |L|/J_ref."""
+    L0, L1, L2 = y[0], y[1], y[2]
+    Ln = math.sqrt(L0 * L0 + L1 * L1 + L2 * L2)
+    if Ln == 0.0:
+        return
+    ang = h * Ln * inv_ref
+    c = math.cos(0.5 * ang)
+    sn = math.sin(0.5 * ang) / Ln
+    _qmul(c, sn * L0, sn * L1, sn * L2, y[3], y[4], y[5], y[6], tmp[3:7])
+    for i in range(4):
+        y[3 + i] = tmp[3 + i]
+
+
+@njit(cache=True)
+def free_step(y, h, Jinv, inv_ref, axis, tau):
+    """One geometric step of the torque-free rotor; eddy modes (no field) decay exactly."""
+    tmp = np.empty(8)
+    _free_case_rotation(y, h, inv_ref, tmp)
+    if axis >= 0 or axis == -2:
+        if axis >= 0:
+            _free_body_step(y, h, Jinv, inv_ref, axis, tmp)
+    else:
+        # Suzuki–Yoshida triple jump of the symmetric midpoint step: order 4
+        g1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+        g0 = 1.0 - 2.0 * g1
+        _free_body_step(y, g1 * h, Jinv, inv_ref, axis, tmp)
+        _free_body_step(y, g0 * h, Jinv, inv_ref, axis, tmp)
+        _free_body_step(y, g1 * h, Jinv, inv_ref, axis, tmp)
+    _normalize_q(y)
+    for n in range(tau.shape[0]):
+        f = math.exp(-h / tau[n])
+        for j in range(3):
+            y[7 + 3 * n + j] *= f
+
+
+@njit(cache=True)
+def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_y, out_N, k_out):
+    """Torque-free counterpart of :func:`integrate_etd` (same stops/record/output contract).
+
+    ``axis``: body axis index carrying H_r (axisymmetric body: exact steps), −2 for a
+    spherical inertia (H_r = 0), −1 for a triaxial body (4th-order midpoint composition).
+    """
+    steps = 0
+    t = t0
+    for i in range(t_stops.shape[0]):
+        span = t_stops[i] - t
+        if span > 0.0:
+            k = int(math.ceil(span / h_max * (1.0 - 1e-12)))
+            if k < 1:
+                k = 1
+            h = span / k
+            for _ in range(k):
+                free_step(y, h, Jinv, inv_ref, axis, tau)
+            steps += k
+            t = t_stops[i]
+        if record[i]:
+            out_y[k_out, :] = y
+            out_N[k_out, 0] = 0.0
+            out_N[k_out, 1] = 0.0
+            out_N[k_out, 2] = 0.0
+            k_out += 1
+    return k_out, steps

@@ -1,0 +1,352 @@
+"""Scene files: one YAML file (SI units) says everything about a run.
+
+A scene is loaded into typed, validated objects; a wrong scene is refused at load with
+one :class:`SceneError` whose message names the key, the value and what is allowed.
+
+Format (all keys but ``rotor``, ``duration`` optional)::
+
+    name: spinup_thin_shell          # defaults to the file name
+    description: one line
+    rotor:
+      inertia: [J1, J2, J3]          # principal moments, kg·m², x3 = polar axis
+      conductor:                     # omit for a non-conducting rotor
+        kind: thin_shell             # thin_shell | solid_sphere | shell
+        outer_radius: 0.025          # r2, m
+        thickness: 0.001             # r2 − r1, m (thin_shell, shell)
+        conductivity: 2.5e7          # σ, S/m
+    torque_model: lag                # none | quasi_static | lag  (physics.md §3)
+    modes: 10                        # eddy modes kept by the lag model of a solid sphere / shell
+    stators:                         # rotating fields B_k = b_k I_k (e1k cos σ_k + e2k sin σ_k)
+      - name: z3
+        axis: [0, 0, 1]              # u_k (case frame), normalised on load
+        coil_constant: 1.0e-3        # b_k, T/A
+        current: 1.0                 # I_k, A (amplitude, ≥ 0)
+        rate: 3141.59                # ν_k = dσ_k/dt, rad/s; the sign is the direction
+        phase: 0.0                   # σ_k at t = 0, rad
+    field:                           # general uniform field B(t) = Re Σ B_p exp(−i ω_p t)
+      - real: [0, 0, 1.0e-3]         # Re B_p, T
+        imag: [0, 0, 0]              # Im B_p, T
+        frequency: 0.0               # ω_p, rad/s
+    commands:                        # piecewise-constant stator commands (field phase continuous)
+      - {time: 30.0, stator: z3, current: 0.0}
+    initial:
+      spin: 0.0                      # |L| / J3, rad/s (or kinetic_moment: |L| in N·m·s)
+      L_direction: [0, 0, 1]         # direction of L in the case frame
+      psi: 0.0                       # Euler angles of the body in the L-frame, rad
+      theta: 0.0
+      phi: 0.0
+    duration: 60.0                   # s
+    output: {rate: 100.0}            # samples per second of simulated time
+    integrator:
+      steps_per_turn: 48             # steps per period of the fastest rotation (spin or field)
+      max_step: null                 # optional upper bound on the step, s
+
+The stator triad: e1k is the next case axis after u_k in cyclic order (z1→z2→z3→z1),
+made orthogonal to u_k; e2k = u_k × e1k. For u = z3 this gives e1 = z1, e2 = z2.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origin
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+__all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir"]
+
+
+class SceneError(ValueError):
+    """A scene that cannot be run: the message names the key, the value and what is allowed."""
+
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Conductor(_Strict):
+    """Homogeneous non-magnetic spherical conductor of the rotor."""
+
+    kind: Literal["thin_shell", "solid_sphere", "shell"]
+    outer_radius: Positive
+    conductivity: Positive
+    thickness: Optional[Positive] = None
+
+    @model_validator(mode="after")
+    def _thickness(self) -> "Conductor":
+        if self.kind == "solid_sphere":
+            if self.thickness is not None:
+                raise ValueError(f"thickness = {self.thickness}: a solid_sphere takes no thickness")
+        else:
+            if self.thickness is None:
+                raise ValueError(f"thickness is missing: a {self.kind} needs thickness (m), 0 < thickness < outer_radius")
+            if self.thickness >= self.outer_radius:
+                raise ValueError(
+                    f"thickness = {self.thickness}: must be less than outer_radius = {self.outer_radius} "
+                    "(use kind: solid_sphere for a full sphere)"
+                )
+        return self
+
+    @property
+    def inner_radius(self) -> float:
+        return 0.0 if self.thickness is None else self.outer_radius - self.thickness
+
+
+class Rotor(_Strict):
+    inertia: Annotated[list[Positive], Field(min_length=3, max_length=3)]
+    conductor: Optional[Conductor] = None
+
+    @field_validator("inertia")
+    @classmethod
+    def _triangle(cls, J: list[float]) -> list[float]:
+        for i in range(3):
+            j, k = (i + 1) % 3, (i + 2) % 3
+            if J[i] > (J[j] + J[k]) * (1 + 1e-12):
+                raise ValueError(
+                    f"inertia = {J}: J{i + 1} = {J[i]} exceeds J{j + 1} + J{k + 1} = {J[j] + J[k]}; "
+                    "principal moments of a rigid body satisfy the triangle inequality"
+                )
+        return J
+
+
+class Stator(_Strict):
+    name: Annotated[str, Field(min_length=1)]
+    axis: Vec3
+    coil_constant: Positive
+    current: NonNegative = 0.0
+    rate: Finite = 0.0
+    phase: Finite = 0.0
+
+    @field_validator("axis")
+    @classmethod
+    def _axis(cls, a: list[float]) -> list[float]:
+        n = math.sqrt(sum(x * x for x in a))
+        if n == 0:
+            raise ValueError(f"axis = {a}: must be a non-zero vector")
+        return [x / n for x in a]
+
+
+class FieldTerm(_Strict):
+    real: Vec3
+    imag: Vec3 = [0.0, 0.0, 0.0]
+    frequency: NonNegative = 0.0
+
+
+class Command(_Strict):
+    time: NonNegative
+    stator: str
+    current: Optional[NonNegative] = None
+    rate: Optional[Finite] = None
+
+
+class Initial(_Strict):
+    spin: Optional[Finite] = None
+    kinetic_moment: Optional[NonNegative] = None
+    L_direction: Vec3 = [0.0, 0.0, 1.0]
+    psi: Finite = 0.0
+    theta: Annotated[float, Field(ge=0, le=math.pi, allow_inf_nan=False)] = 0.0
+    phi: Finite = 0.0
+
+    @model_validator(mode="after")
+    def _one_magnitude(self) -> "Initial":
+        if self.spin is not None and self.kinetic_moment is not None:
+            raise ValueError("give either spin (rad/s, |L| = J3·spin) or kinetic_moment (N·m·s), not both")
+        if sum(x * x for x in self.L_direction) == 0:
+            raise ValueError(f"L_direction = {self.L_direction}: must be a non-zero vector")
+        return self
+
+
+class Output(_Strict):
+    rate: Positive = 100.0
+
+
+class Integrator(_Strict):
+    steps_per_turn: Annotated[int, Field(ge=4, le=100000)] = 48
+    max_step: Optional[Positive] = None
+
+
+class Scene(_Strict):
+    """A validated scene. ``source`` is the file it came from (None when built from a dict)."""
+
+    name: str = "scene"
+    description: str = ""
+    rotor: Rotor
+    torque_model: Literal["none", "quasi_static", "lag"] = "lag"
+    modes: Annotated[int, Field(ge=1, le=500)] = 10
+    stators: list[Stator] = []
+    field: list[FieldTerm] = []
+    commands: list[Command] = []
+    initial: Initial = Initial()
+    duration: Positive
+    output: Output = Output()
+    integrator: Integrator = Integrator()
+    fidelity: Literal["full"] = "full"
+    source: Optional[str] = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Scene":
+        names = [s.name for s in self.stators]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"stators: name {sorted(dup)[0]!r} is used twice; stator names must be unique")
+        for i, c in enumerate(self.commands):
+            if c.stator not in names:
+                raise ValueError(
+                    f"commands.{i}.stator = {c.stator!r}: unknown stator; allowed: {names or 'none defined'}"
+                )
+            if c.current is None and c.rate is None:
+                raise ValueError(f"commands.{i}: a command sets current and/or rate; it has neither")
+        if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:
+            raise ValueError(
+                f"torque_model = {self.torque_model!r} needs rotor.conductor; add one or set torque_model: none"
+            )
+        return self
+
+    # --- derived quantities -------------------------------------------------------------
+    @property
+    def inertia(self) -> np.ndarray:
+        return np.array(self.rotor.inertia, dtype=float)
+
+    def stator_index(self, name: str) -> int:
+        return [s.name for s in self.stators].index(name)
+
+
+# --- loading ------------------------------------------------------------------------------
+
+def config_dir() -> Path:
+    """Folder of the built-in scenes: the repository's config/, or share/gyro_sim/config when installed."""
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        for cand in (parent / "config", parent / "share" / "gyro_sim" / "config"):
+            if (cand / "spinup_thin_shell.yaml").is_file():
+                return cand
+    import sys
+
+    cand = Path(sys.prefix) / "share" / "gyro_sim" / "config"
+    return cand
+
+
+def builtin_scenes() -> dict[str, Path]:
+    """Built-in scene names → files (every YAML file in config/ that has a ``rotor`` key)."""
+    out: dict[str, Path] = {}
+    d = config_dir()
+    if d.is_dir():
+        for p in sorted(d.glob("*.yaml")):
+            try:
+                data = yaml.safe_load(p.read_text())
+            except yaml.YAMLError:
+                continue
+            if isinstance(data, dict) and "rotor" in data:
+                out[p.stem] = p
+    return out
+
+
+def _model_at(model: type[BaseModel], loc: tuple) -> Optional[type[BaseModel]]:
+    """The pydantic model class that owns the key at ``loc`` (for listing allowed keys)."""
+    cur: Any = model
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue
+        if not (isinstance(cur, type) and issubclass(cur, BaseModel)) or part not in cur.model_fields:
+            return None
+        cur = cur.model_fields[part].annotation
+        # unwrap Optional[...] / list[...]
+        for _ in range(3):
+            origin = get_origin(cur)
+            if origin in (list, Union) or str(origin) == "typing.Union" or origin is not None and "UnionType" in str(origin):
+                args = [a for a in get_args(cur) if a is not type(None)]
+                cur = args[0] if args else cur
+            else:
+                break
+    return cur if isinstance(cur, type) and issubclass(cur, BaseModel) else None
+
+
+def _format_errors(err: ValidationError, where: str) -> str:
+    lines = []
+    for e in err.errors():
+        loc = tuple(x for x in e["loc"] if x != "__root__")
+        key = ".".join(str(x) for x in loc) or "(scene)"
+        msg = e["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        if e["type"] == "extra_forbidden":
+            owner = _model_at(Scene, loc)
+            allowed = sorted(k for k in owner.model_fields if k != "source") if owner else []
+            lines.append(f"{key}: unknown key; allowed keys here: {', '.join(allowed)}")
+        elif e["type"] == "missing":
+            lines.append(f"{key}: required key is missing")
+        elif e["type"] in ("value_error", "assertion_error") and key != "(scene)" and "=" in msg:
+            lines.append(f"{key}: {msg}")
+        elif e["type"] in ("value_error",):
+            lines.append(f"{key}: {msg}" if key != "(scene)" else msg)
+        else:
+            lines.append(f"{key} = {e.get('input')!r}: {msg}")
+    head = f"invalid scene {where}" if where else "invalid scene"
+    if len(lines) == 1:
+        return f"{head}: {lines[0]}"
+    return head + ":\n  " + "\n  ".join(lines)
+
+
+def scene_from_dict(data: Any, where: str = "", default_name: str = "scene") -> Scene:
+    """Validate a scene given as a dict (parsed YAML). Raises SceneError."""
+    if not isinstance(data, dict):
+        raise SceneError(f"invalid scene {where}: the top level must be a mapping of keys, got {type(data).__name__}")
+    data = dict(data)
+    data.setdefault("name", default_name)
+    if "source" in data:
+        raise SceneError(f"invalid scene {where}: source: unknown key (it is set by the loader)")
+    data["source"] = where or None
+    try:
+        return Scene.model_validate(data)
+    except ValidationError as err:
+        raise SceneError(_format_errors(err, where)) from None
+
+
+def load_scene(name_or_path: Union[str, Path], overrides: Optional[dict] = None) -> Scene:
+    """Load and validate a scene from a YAML file or a built-in scene name.
+
+    ``overrides`` maps dotted keys (``"initial.theta"``) to values applied before validation.
+    """
+    p = Path(name_or_path)
+    if not p.is_file():
+        scenes = builtin_scenes()
+        key = p.stem if p.suffix in (".yaml", ".yml") else str(name_or_path)
+        if key in scenes and p.parent == Path("."):
+            p = scenes[key]
+        else:
+            raise SceneError(
+                f"scene {str(name_or_path)!r}: no such file and no built-in scene of that name; "
+                f"built-in scenes: {', '.join(scenes) or 'none found'}"
+            )
+    try:
+        data = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as e:
+        raise SceneError(f"invalid scene {p}: not valid YAML: {e}") from None
+    if overrides:
+        data = apply_overrides(data, overrides)
+    return scene_from_dict(data, where=str(p), default_name=p.stem)
+
+
+def apply_overrides(data: dict, overrides: dict) -> dict:
+    """Copy of ``data`` with dotted keys set (list items by index: ``stators.0.current``)."""
+    import copy
+
+    out = copy.deepcopy(data)
+    for dotted, value in overrides.items():
+        cur = out
+        parts = dotted.split(".")
+        for part in parts[:-1]:
+            cur = cur[int(part)] if isinstance(cur, list) else cur.setdefault(part, {})
+        last = parts[-1]
+        if isinstance(cur, list):
+            cur[int(last)] = value
+        else:
+            cur[last] = value
+    return out

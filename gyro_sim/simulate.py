@@ -1,0 +1,300 @@
+"""Running a scene: the :class:`Simulator` (advance in time, take stator commands) and :func:`run`.
+
+The simulator is the one piece of code every front end drives: :func:`run` (in-process, the
+fastest), the ROS simulator node (lockstep / real-time) and the tests. Units SI, L in the case
+frame, attitude quaternion body → case.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+
+from . import kernels
+from .conductor import conductor_model
+from .frames import attitude_from_euler, euler_angles, quat_to_matrix
+from .scene import Scene, SceneError
+
+__all__ = ["Simulator", "RunResult", "run", "stator_triad"]
+
+
+def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u."""
+    u = np.asarray(u, dtype=float)
+    u = u / np.linalg.norm(u)
+    i = int(np.argmax(np.abs(u)))
+    z = np.zeros(3)
+    z[(i + 1) % 3] = 1.0
+    e1 = z - np.dot(z, u) * u
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(u, e1), u
+
+
+@dataclass
+class RunResult:
+    """Time series of a run (rows = output samples). Frames: L, torque case; omega_b body."""
+
+    scene: Scene
+    t: np.ndarray  # (n,) s
+    L: np.ndarray  # (n,3) N·m·s, case frame
+    q: np.ndarray  # (n,4) quaternion (w,x,y,z) body → case
+    omega_b: np.ndarray  # (n,3) rad/s, body frame
+    euler: np.ndarray  # (n,3) ψ, θ, φ rad (body in the L-frame)
+    torque: np.ndarray  # (n,3) N·m, case frame (electrodynamic)
+    energy: np.ndarray  # (n,) J, rotational kinetic energy
+    stator_names: list[str]
+    current: np.ndarray  # (n,k) A
+    field_rate: np.ndarray  # (n,k) rad/s (signed)
+    field_phase: np.ndarray  # (n,k) rad
+    modes: np.ndarray  # (n,3N) eddy-mode states e_n, body frame, T
+    wall_time: float = 0.0
+    steps: int = 0
+
+    @property
+    def spin_rate(self) -> np.ndarray:
+        """Body angular velocity about the polar axis x3, rad/s."""
+        return self.omega_b[:, 2]
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Nutation angle θ (rad) between x3 and L."""
+        return self.euler[:, 1]
+
+    def summary(self) -> dict:
+        """Final values and cost of the run (SI units; θ in degrees)."""
+        t_end = float(self.t[-1])
+        return {
+            "scene": self.scene.name,
+            "spin_rate": float(self.spin_rate[-1]),
+            "spin_rev_s": float(self.spin_rate[-1] / (2 * math.pi)),
+            "theta_deg": float(np.degrees(self.theta[-1])),
+            "L_norm": float(np.linalg.norm(self.L[-1])),
+            "energy": float(self.energy[-1]),
+            "t_end": t_end,
+            "wall_time": self.wall_time,
+            "steps": int(self.steps),
+            "realtime_factor": t_end / self.wall_time if self.wall_time > 0 else float("inf"),
+        }
+
+
+class Simulator:
+    """The full model of a scene, advanced in time under piecewise-constant stator commands.
+
+    State: ``t`` (s) and ``y`` (see :mod:`gyro_sim.kernels`). Field phases σ_k are continuous
+    across command changes.
+    """
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        J = scene.inertia
+        self.J = J
+        self.Jinv = 1.0 / J
+        # --- eddy-current model (physics.md §3)
+        cond = scene.rotor.conductor
+        self.conductor = None
+        tau = np.zeros(0)
+        w = np.zeros(0)
+        tail = 0.0
+        c_m = 0.0
+        if cond is not None and scene.torque_model != "none":
+            self.conductor = conductor_model(
+                cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness, n_modes=scene.modes
+            )
+            c_m = float(self.conductor.moment_scale)
+            if scene.torque_model == "quasi_static":
+                tail = float(self.conductor.tau_eff)  # [K] (1.2)
+            else:
+                tau = np.asarray(self.conductor.tau, dtype=float)
+                w = np.asarray(self.conductor.weight, dtype=float)
+                tail = float(self.conductor.tail_tau)
+        self.tau, self.w, self.tail, self.c_m = tau, w, tail, c_m
+        self.lam = np.concatenate([np.zeros(7), np.repeat(-1.0 / tau, 3) if tau.size else np.zeros(0)])
+        # --- stators
+        st = scene.stators
+        self.stator_names = [s.name for s in st]
+        triads = [stator_triad(s.axis) for s in st]
+        self.e1 = np.array([t[0] for t in triads]).reshape(-1, 3)
+        self.e2 = np.array([t[1] for t in triads]).reshape(-1, 3)
+        self.b = np.array([s.coil_constant for s in st], dtype=float)
+        self.current = np.array([s.current for s in st], dtype=float)
+        self.rate = np.array([s.rate for s in st], dtype=float)
+        self.phase = np.array([s.phase for s in st], dtype=float)
+        # --- general field B(t) = Re Σ B_p exp(−i ω_p t)
+        self.field_B = np.array([np.array(f.real) + 1j * np.array(f.imag) for f in scene.field]).reshape(-1, 3)
+        self.field_om = np.array([f.frequency for f in scene.field], dtype=float)
+        # --- initial state
+        ini = scene.initial
+        d = np.asarray(ini.L_direction, dtype=float)
+        d /= np.linalg.norm(d)
+        Lmag = ini.kinetic_moment if ini.kinetic_moment is not None else J[2] * (ini.spin or 0.0)
+        self.y = np.zeros(7 + 3 * tau.size)
+        self.y[0:3] = Lmag * d
+        self.y[3:7] = attitude_from_euler(d, ini.psi, ini.theta, ini.phi)
+        self.t = 0.0
+        self.steps = 0
+        # free-rotor geometry: reference inertia and the axis carrying H_r
+        if J[0] == J[1] == J[2]:
+            self._free_axis, ref = -2, J[0]
+        elif J[0] == J[1]:
+            self._free_axis, ref = 2, J[0]
+        elif J[1] == J[2]:
+            self._free_axis, ref = 0, J[1]
+        elif J[0] == J[2]:
+            self._free_axis, ref = 1, J[0]
+        else:
+            self._free_axis, ref = -1, J[0]
+        self._inv_ref = 1.0 / ref
+        self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
+
+    # --- commands --------------------------------------------------------------------------
+    def set_stator(self, k: int, current: Optional[float] = None, rate: Optional[float] = None) -> None:
+        """Command stator k from now on: current amplitude (A, ≥ 0) and signed field rate (rad/s)."""
+        if current is not None:
+            if not (math.isfinite(current) and current >= 0):
+                raise ValueError(f"stator {self.stator_names[k]!r}: current = {current}: must be finite and ≥ 0 A")
+            self.current[k] = current
+        if rate is not None:
+            if not math.isfinite(rate):
+                raise ValueError(f"stator {self.stator_names[k]!r}: rate = {rate}: must be finite (rad/s)")
+            self.rate[k] = rate
+            self._nu_max = max(self._nu_max, abs(rate))
+
+    # --- fields ----------------------------------------------------------------------------
+    def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T)."""
+        on = self.current > 0
+        c, s = np.cos(self.phase[on]), np.sin(self.phase[on])
+        amp = (self.b * self.current)[on][:, None]
+        e1, e2 = self.e1[on], self.e2[on]
+        # b I (e1 cos(σ + ν s) + e2 sin(σ + ν s))
+        Bre = amp * (e1 * c[:, None] + e2 * s[:, None])
+        Bim = amp * (-e1 * s[:, None] + e2 * c[:, None])
+        om = self.rate[on]
+        if self.field_om.size:
+            # Re(B_p e^{−iω t}) = Re(B̃) cos ωs + Im(B̃) sin ωs with B̃ = B_p e^{−iω t_now}
+            Bt = self.field_B * np.exp(-1j * self.field_om * self.t)[:, None]
+            Bre = np.vstack([Bre, Bt.real])
+            Bim = np.vstack([Bim, Bt.imag])
+            om = np.concatenate([om, self.field_om])
+        return np.ascontiguousarray(Bre).reshape(-1, 3), np.ascontiguousarray(Bim).reshape(-1, 3), np.asarray(om, float)
+
+    def _max_step(self, free: bool) -> float:
+        spt = self.scene.integrator.steps_per_turn
+        L = np.linalg.norm(self.y[0:3])
+        if free:
+            if self._free_axis != -1:
+                h = math.inf  # the free step is exact
+            else:
+                rate = L * np.max(np.abs(self.Jinv - self._inv_ref))
+                h = 2 * math.pi / (spt * rate) if rate > 0 else math.inf
+        else:
+            om = max(L * np.max(self.Jinv), self._nu_max, float(np.max(self.field_om, initial=0.0)))
+            h = 2 * math.pi / (spt * om) if om > 0 else math.inf
+        if self.scene.integrator.max_step is not None:
+            h = min(h, self.scene.integrator.max_step)
+        return h
+
+    # --- time stepping -----------------------------------------------------------------------
+    def advance(self, t_end: float, sample_times: Optional[np.ndarray] = None,
+                out_y: Optional[np.ndarray] = None, out_N: Optional[np.ndarray] = None, k_out: int = 0) -> int:
+        """Integrate to ``t_end`` (s) under the present commands, recording at ``sample_times``.
+
+        Sample times must lie in (t, t_end]; states and torques are written to out_y/out_N
+        from row k_out. Returns the next free row.
+        """
+        if t_end < self.t:
+            raise ValueError(f"advance: t_end = {t_end} is before the present time {self.t}")
+        if sample_times is None or len(sample_times) == 0:
+            stops = np.array([t_end])
+            record = np.array([False])
+            out_y = np.zeros((1, self.y.size))
+            out_N = np.zeros((1, 3))
+        else:
+            stops = np.asarray(sample_times, dtype=float)
+            record = np.ones(stops.size, dtype=np.bool_)
+            if stops[-1] < t_end:
+                stops = np.append(stops, t_end)
+                record = np.append(record, False)
+        Bre, Bim, om = self.phasors()
+        free = om.size == 0
+        h_max = self._max_step(free)
+        if not math.isfinite(h_max):
+            h_max = max(t_end - self.t, 1e-300)
+        if free:
+            k_out, steps = kernels.integrate_free(
+                self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
+                out_y, out_N, k_out)
+        else:
+            k_out, steps = kernels.integrate_etd(
+                self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
+                self.tail, self.lam, out_y, out_N, k_out)
+        self.steps += steps
+        self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
+        self.t = t_end
+        return k_out
+
+    def torque(self) -> np.ndarray:
+        """Electrodynamic torque now (case frame, N·m)."""
+        Bre, Bim, om = self.phasors()
+        F = np.zeros(self.y.size)
+        kernels.nonlinear_part(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail,
+                               self.tau.size, F, np.zeros(24))
+        return F[0:3].copy()
+
+
+def derived_outputs(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Body angular velocity (rad/s), Euler angles (rad) and kinetic energy (J) of states."""
+    R = quat_to_matrix(q)
+    Lb = np.einsum("nji,nj->ni", R, L)
+    omega_b = Lb / J
+    energy = 0.5 * np.einsum("ni,ni->n", Lb, omega_b)
+    return omega_b, euler_angles(R, L), energy
+
+
+def run(scene: Scene, duration: Optional[float] = None) -> RunResult:
+    """Run a scene in-process (no ROS) and return its time series at the scene's output rate."""
+    T = scene.duration if duration is None else float(duration)
+    if not (math.isfinite(T) and T > 0):
+        raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
+    sim = Simulator(scene)
+    dt_out = 1.0 / scene.output.rate
+    n_out = int(math.floor(T / dt_out + 1e-9)) + 1
+    t_out = np.arange(n_out) * dt_out
+    if t_out[-1] < T * (1 - 1e-12):
+        t_out = np.append(t_out, T)
+    k = sim.stator_names
+    out_y = np.empty((t_out.size, sim.y.size))
+    out_N = np.empty((t_out.size, 3))
+    cur = np.empty((t_out.size, len(k)))
+    rate = np.empty_like(cur)
+    phase = np.empty_like(cur)
+    # command instants split the run into segments
+    cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
+    breaks = sorted({c.time for c in cmds} | {T})
+    t0 = time.perf_counter()
+    row, ci = 0, 0
+    for tb in breaks:
+        while ci < len(cmds) and cmds[ci].time <= sim.t:
+            c = cmds[ci]
+            sim.set_stator(scene.stator_index(c.stator), current=c.current, rate=c.rate)
+            ci += 1
+        if row == 0:  # the initial sample, with the commands of t = 0 applied
+            out_y[0], out_N[0] = sim.y, sim.torque()
+            cur[0], rate[0], phase[0] = sim.current, sim.rate, sim.phase
+            row = 1
+        sel = t_out[row:][t_out[row:] <= tb + 1e-12 * max(1.0, tb)]
+        t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
+        rows = slice(row, row + sel.size)
+        row = sim.advance(tb, sel, out_y, out_N, row)
+        cur[rows] = c0
+        rate[rows] = r0
+        phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
+    wall = time.perf_counter() - t0
+    L, q = out_y[:row, 0:3], out_y[:row, 3:7]
+    omega_b, eul, energy = derived_outputs(sim.J, L, q)
+    return RunResult(scene=scene, t=t_out[:row], L=L, q=q, omega_b=omega_b, euler=eul, torque=out_N[:row],
+                     energy=energy, stator_names=k, current=cur[:row], field_rate=rate[:row],
+                     field_phase=phase[:row], modes=out_y[:row, 7:], wall_time=wall, steps=sim.steps)
