@@ -103,9 +103,9 @@ def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
     F[0:3] = N (case, N·m) = (R m_b) × B  with m_b = c (Σ w_n e_n − T_tail dB_b/dt)   [physics.md §3]
     F[3:7] = ½ q ⊗ (0, Ω_b),  Ω_b = J⁻¹ Rᵀ L
     F[7+3n+j] = −(dB_b/dt)_j,  dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
-    ``work`` is scratch space of length ≥ 21.
+    ``work`` is scratch space of length ≥ 25.
     """
-    q = y[3:7]
+    q = work[21:25]
     B = work[0:3]
     dB = work[3:6]
     Bb = work[6:9]
@@ -114,15 +114,19 @@ def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
     mb = work[15:18]
     mc = work[18:21]
     field_case(s, Bre, Bim, om, B, dB)
+    # stage quaternions are not unit: the attitude is that of q/|q|
+    inv_n = 1.0 / math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+    for j in range(4):
+        q[j] = y[3 + j] * inv_n
     _rot_case_to_body(q, y[0:3], Lb)
     Ox = Jinv[0] * Lb[0]
     Oy = Jinv[1] * Lb[1]
     Oz = Jinv[2] * Lb[2]
-    # quaternion kinematics
-    F[3] = -0.5 * (q[1] * Ox + q[2] * Oy + q[3] * Oz)
-    F[4] = 0.5 * (q[0] * Ox + q[2] * Oz - q[3] * Oy)
-    F[5] = 0.5 * (q[0] * Oy + q[3] * Ox - q[1] * Oz)
-    F[6] = 0.5 * (q[0] * Oz + q[1] * Oy - q[2] * Ox)
+    # quaternion kinematics dq/dt = ½ q ⊗ (0, Ω_b) of the stage quaternion itself
+    F[3] = -0.5 * (y[4] * Ox + y[5] * Oy + y[6] * Oz)
+    F[4] = 0.5 * (y[3] * Ox + y[5] * Oz - y[6] * Oy)
+    F[5] = 0.5 * (y[3] * Oy + y[6] * Ox - y[4] * Oz)
+    F[6] = 0.5 * (y[3] * Oz + y[4] * Oy - y[5] * Ox)
     if c_m == 0.0:
         F[0] = F[1] = F[2] = 0.0
         for i in range(7, F.shape[0]):
@@ -233,7 +237,7 @@ def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m,
     n = y.shape[0]
     nm = (n - 7) // 3
     buf = np.empty((7, n))
-    work = np.empty(24)
+    work = np.empty(25)
     E = np.empty(n)
     E2 = np.empty(n)
     Q = np.empty(n)

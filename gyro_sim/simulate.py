@@ -241,7 +241,7 @@ class Simulator:
         Bre, Bim, om = self.phasors()
         F = np.zeros(self.y.size)
         kernels.nonlinear_part(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail,
-                               self.tau.size, F, np.zeros(24))
+                               self.tau.size, F, np.zeros(25))
         return F[0:3].copy()
 
 

@@ -1,0 +1,78 @@
+"""Packaging for gyro_sim, in the style of ros2/examples (ament_python).
+
+Works two ways:
+  * ``pip install .`` on a machine without ROS (the ROS 2 Python wheels are the
+    optional ``ros`` extra: ``pip install '.[ros]'``);
+  * ``colcon build`` in a ROS 2 workspace, where ``package.xml`` names the ROS deps.
+
+The data_files put the ament index marker, package.xml and config/*.yaml under
+``<prefix>/share`` so ``ros2 run gyro_sim ...`` and ``get_package_share_directory``
+work with either tool.
+"""
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+package_name = 'gyro_sim'
+here = os.path.abspath(os.path.dirname(__file__))
+
+
+def _read(name):
+    with open(os.path.join(here, name), encoding='utf-8') as f:
+        return f.read()
+
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+    ],
+    python_requires='>=3.10',
+    install_requires=[
+        'numpy>=1.24',
+        'scipy>=1.10',
+        'numba>=0.59',
+        'pyyaml>=6',
+        'pydantic>=2.5',
+        'matplotlib>=3.7',
+        'rosbags>=0.10',
+        'mcap>=1.1',
+    ],
+    extras_require={
+        # PyPI wheels of ROS 2 for machines without a ROS install. The lower bounds
+        # are the oldest wheels published (ROS 2 Jazzy); newer ones are Kilted.
+        'ros': [
+            'ros-rclpy>=7.1',
+            'ros-rmw-fastrtps-cpp>=8.4',
+            'ros-std-msgs>=5.3',
+            'ros-geometry-msgs>=5.3',
+            'ros-sensor-msgs>=5.3',
+            'ros-rosgraph-msgs>=2.0',
+            'ros-builtin-interfaces>=2.0',
+        ],
+        # ros2/examples declare test deps as the 'test' extra (tests_require is gone
+        # from setuptools).
+        'test': [
+            'pytest>=7',
+            'hypothesis>=6',
+        ],
+    },
+    # numba's on-disk cache (cache=True) writes next to the modules: never zipped.
+    zip_safe=False,
+    maintainer='gyro_sim maintainers',
+    maintainer_email='maintainers@example.com',
+    description='Simulator of an electrodynamically controlled gyroscope (ROS 2, Python).',
+    long_description=_read('README.md'),
+    long_description_content_type='text/markdown',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'gyro-sim = gyro_sim.cli:main',
+        ],
+    },
+)
