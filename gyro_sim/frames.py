@@ -80,12 +80,14 @@ def rot_z(a: float) -> np.ndarray:
 def l_frame(L: np.ndarray) -> np.ndarray:
     """Kinetic-moment frame Y (..., 3, 3), columns y1, y2, y3, of case-frame L (..., 3).
 
-    Where L = 0 the frame of L ∥ z3 (Y = I) is returned; where L ∥ ±z3 the azimuth σ is 0.
+    Where L = 0 the frame of L ∥ z3 (Y = I) is returned; where L ∥ ±z3 the azimuth σ is 0
+    (also for signed zeros, which atan2 would turn into σ = π).
     """
     L = np.asarray(L, dtype=float)
     Lx, Ly, Lz = np.moveaxis(L, -1, 0)
-    rho = np.arctan2(np.hypot(Lx, Ly), Lz)
-    sig = np.arctan2(Ly, Lx)
+    h = np.hypot(Lx, Ly)
+    rho = np.arctan2(h, Lz)
+    sig = np.where(h > 0.0, np.arctan2(Ly, Lx), 0.0)
     cr, sr, cs, ss = np.cos(rho), np.sin(rho), np.cos(sig), np.sin(sig)
     Y = np.empty(L.shape[:-1] + (3, 3))
     Y[..., 0, 0], Y[..., 1, 0], Y[..., 2, 0] = cr * cs, cr * ss, -sr

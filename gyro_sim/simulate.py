@@ -134,6 +134,8 @@ class Simulator:
         self.y[0:3] = Lmag * d
         self.y[3:7] = attitude_from_euler(d, ini.psi, ini.theta, ini.phi)
         self.t = 0.0
+        # the fields are switched on at t = 0 on a rotor free of eddy currents
+        self._field_step(np.zeros(3), self.field_now())
         self.steps = 0
         # free-rotor geometry: reference inertia and the axis carrying H_r
         if J[0] == J[1] == J[2]:
@@ -151,11 +153,17 @@ class Simulator:
 
     # --- commands --------------------------------------------------------------------------
     def set_stator(self, k: int, current: Optional[float] = None, rate: Optional[float] = None) -> None:
-        """Command stator k from now on: current amplitude (A, ≥ 0) and signed field rate (rad/s)."""
+        """Command stator k from now on: current amplitude (A, ≥ 0) and signed field rate (rad/s).
+
+        A current step makes a field step ΔB; each eddy mode answers it instantly with its
+        high-frequency limit (ĝ → −1), e_n → e_n − ΔB_b (:meth:`_field_step`).
+        """
         if current is not None:
             if not (math.isfinite(current) and current >= 0):
                 raise ValueError(f"stator {self.stator_names[k]!r}: current = {current}: must be finite and ≥ 0 A")
+            before = self.field_now()
             self.current[k] = current
+            self._field_step(before, self.field_now())
         if rate is not None:
             if not math.isfinite(rate):
                 raise ValueError(f"stator {self.stator_names[k]!r}: rate = {rate}: must be finite (rad/s)")
@@ -163,6 +171,18 @@ class Simulator:
             self._nu_max = max(self._nu_max, abs(rate))
 
     # --- fields ----------------------------------------------------------------------------
+    def field_now(self) -> np.ndarray:
+        """Field B (case frame, T) at the present time."""
+        Bre, _, _ = self.phasors()
+        return Bre.sum(axis=0)
+
+    def _field_step(self, before: np.ndarray, after: np.ndarray) -> None:
+        """Instant response of the eddy modes to a field step: e_n −= Rᵀ ΔB (τ_n ė_n + e_n = −τ_n dB_b/dt)."""
+        if self.tau.size == 0:
+            return
+        dBb = quat_to_matrix(self.y[3:7]).T @ (after - before)
+        self.y[7:] -= np.tile(dBb, self.tau.size)
+
     def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T)."""
         on = self.current > 0
