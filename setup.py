@@ -60,6 +60,7 @@ setup(
         'test': [
             'pytest>=7',
             'hypothesis>=6',
+            'mpmath>=1.3',  # 50-digit reference values of [M] (2.13) in test_conductor
         ],
     },
     # numba's on-disk cache (cache=True) writes next to the modules: never zipped.
