@@ -38,11 +38,9 @@ from numba import njit
 
 
 @njit(cache=True, inline="always")
-def _rot_body_to_case(q, v, out):
-    """out = R(q) v."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
+def _rotate(w, x, y, z, v, out):
+    """out = R v for the unit quaternion (w, x, y, z): t = 2 (q_v × v); v' = v + w t + q_v × t."""
     vx, vy, vz = v[0], v[1], v[2]
-    # t = 2 (qv × v); v' = v + w t + qv × t
     tx = 2.0 * (y * vz - z * vy)
     ty = 2.0 * (z * vx - x * vz)
     tz = 2.0 * (x * vy - y * vx)
@@ -52,16 +50,15 @@ def _rot_body_to_case(q, v, out):
 
 
 @njit(cache=True, inline="always")
+def _rot_body_to_case(q, v, out):
+    """out = R(q) v."""
+    _rotate(q[0], q[1], q[2], q[3], v, out)
+
+
+@njit(cache=True, inline="always")
 def _rot_case_to_body(q, v, out):
-    """out = R(q)ᵀ v."""
-    w, x, y, z = q[0], -q[1], -q[2], -q[3]
-    vx, vy, vz = v[0], v[1], v[2]
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    out[0] = vx + w * tx + (y * tz - z * ty)
-    out[1] = vy + w * ty + (z * tx - x * tz)
-    out[2] = vz + w * tz + (x * ty - y * tx)
+    """out = R(q)ᵀ v (rotation by the conjugate quaternion)."""
+    _rotate(q[0], -q[1], -q[2], -q[3], v, out)
 
 
 @njit(cache=True, inline="always")
