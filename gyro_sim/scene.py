@@ -40,6 +40,12 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     integrator:
       steps_per_turn: 48             # steps per period of the fastest rotation (spin or field)
       max_step: null                 # optional upper bound on the step, s
+    controller:                      # optional: a law of gyro_ctl run every period (s)
+      law: psi_switching             # spinup | psi_switching
+      period: 0.001                  # s (default: the output period)
+      params: {nu: 300.0, control_current: 1.0, spin_current: 1.0, spin_rate: 3000.0}
+
+Fields are switched on at t = 0 on a rotor free of eddy currents.
 
 The stator triad: e1k is the next case axis after u_k in cyclic order (z1→z2→z3→z1),
 made orthogonal to u_k; e2k = u_k × e1k. For u = z3 this gives e1 = z1, e2 = z2.
@@ -53,6 +59,8 @@ from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origi
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from gyro_ctl.config import ControllerConfig
 
 __all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir"]
 
@@ -187,6 +195,7 @@ class Scene(_Strict):
     duration: Positive
     output: Output = Output()
     integrator: Integrator = Integrator()
+    controller: Optional[ControllerConfig] = None
     fidelity: Literal["full"] = "full"
     source: Optional[str] = None
 
@@ -203,6 +212,12 @@ class Scene(_Strict):
                 )
             if c.current is None and c.rate is None:
                 raise ValueError(f"commands.{i}: a command sets current and/or rate; it has neither")
+        if self.controller is not None:
+            for n in self.controller.stators_used():
+                if n not in names:
+                    raise ValueError(
+                        f"controller.params: stator {n!r} is not defined; allowed: {names or 'none defined'}"
+                    )
         if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:
             raise ValueError(
                 f"torque_model = {self.torque_model!r} needs rotor.conductor; add one or set torque_model: none"

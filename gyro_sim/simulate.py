@@ -161,9 +161,10 @@ class Simulator:
         if current is not None:
             if not (math.isfinite(current) and current >= 0):
                 raise ValueError(f"stator {self.stator_names[k]!r}: current = {current}: must be finite and ≥ 0 A")
-            before = self.field_now()
-            self.current[k] = current
-            self._field_step(before, self.field_now())
+            if current != self.current[k]:
+                before = self.field_now()
+                self.current[k] = current
+                self._field_step(before, self.field_now())
         if rate is not None:
             if not math.isfinite(rate):
                 raise ValueError(f"stator {self.stator_names[k]!r}: rate = {rate}: must be finite (rad/s)")
@@ -265,56 +266,160 @@ class Simulator:
         return F[0:3].copy()
 
 
+def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """L_b = Rᵀ L (N·m·s) and Ω_b = J⁻¹ L_b (rad/s) of states (..., 3), (..., 4).
+
+    Written element by element (no BLAS) so a row gives the same bits alone or in a batch:
+    the in-process controller and the controller node see identical numbers.
+    """
+    R = quat_to_matrix(q)
+    Lb = R[..., 0, :] * L[..., 0:1] + R[..., 1, :] * L[..., 1:2] + R[..., 2, :] * L[..., 2:3]
+    return Lb, Lb / J
+
+
 def derived_outputs(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Body angular velocity (rad/s), Euler angles (rad) and kinetic energy (J) of states."""
     R = quat_to_matrix(q)
-    Lb = np.einsum("nji,nj->ni", R, L)
-    omega_b = Lb / J
+    Lb, omega_b = body_rates(J, L, q)
     energy = 0.5 * np.einsum("ni,ni->n", Lb, omega_b)
     return omega_b, euler_angles(R, L), energy
 
 
-def run(scene: Scene, duration: Optional[float] = None) -> RunResult:
-    """Run a scene in-process (no ROS) and return its time series at the scene's output rate."""
-    T = scene.duration if duration is None else float(duration)
-    if not (math.isfinite(T) and T > 0):
-        raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
-    sim = Simulator(scene)
-    dt_out = 1.0 / scene.output.rate
-    n_out = int(math.floor(T / dt_out + 1e-9)) + 1
-    t_out = np.arange(n_out) * dt_out
-    if t_out[-1] < T * (1 - 1e-12):
-        t_out = np.append(t_out, T)
-    k = sim.stator_names
-    out_y = np.empty((t_out.size, sim.y.size))
-    out_N = np.empty((t_out.size, 3))
-    cur = np.empty((t_out.size, len(k)))
-    rate = np.empty_like(cur)
-    phase = np.empty_like(cur)
-    # command instants split the run into segments
-    cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
-    breaks = sorted({c.time for c in cmds} | {T})
-    t0 = time.perf_counter()
-    row, ci = 0, 0
-    for tb in breaks:
-        while ci < len(cmds) and cmds[ci].time <= sim.t:
-            c = cmds[ci]
-            sim.set_stator(scene.stator_index(c.stator), current=c.current, rate=c.rate)
-            ci += 1
-        if row == 0:  # the initial sample, with the commands of t = 0 applied
-            out_y[0], out_N[0] = sim.y, sim.torque()
-            cur[0], rate[0], phase[0] = sim.current, sim.rate, sim.phase
-            row = 1
+class Runner:
+    """Advances a :class:`Simulator` break by break over a scene's duration, collecting the outputs.
+
+    Breaks are the output instants, the scene's command instants and the controller ticks. At each
+    break the scene's due commands are applied; at a controller tick the caller supplies the
+    commands (in-process: the law; ROS node: the command message). The sample recorded at time t
+    shows the state at t and the field that acted up to t. Used by :func:`run` and by the
+    simulator node, so both produce the same numbers.
+    """
+
+    def __init__(self, scene: Scene, duration: Optional[float] = None):
+        T = scene.duration if duration is None else float(duration)
+        if not (math.isfinite(T) and T > 0):
+            raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
+        self.scene, self.T = scene, T
+        self.sim = Simulator(scene)
+        dt_out = 1.0 / scene.output.rate
+        t_out = np.arange(int(math.floor(T / dt_out + 1e-9)) + 1) * dt_out
+        if t_out[-1] < T * (1 - 1e-12):
+            t_out = np.append(t_out, T)
+        self.t_out = t_out
+        ctl = scene.controller
+        self.period = (ctl.period or dt_out) if ctl is not None else None
+        ticks = np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if ctl is not None else np.zeros(0)
+        self._ticks = set(ticks.tolist())
+        self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
+        self.breaks = sorted(set(t_out.tolist()) | {c.time for c in self._cmds} | self._ticks | {T})
+        n = t_out.size
+        k = len(self.sim.stator_names)
+        self.out_y = np.empty((n, self.sim.y.size))
+        self.out_N = np.empty((n, 3))
+        self.cur = np.empty((n, k))
+        self.rate = np.empty((n, k))
+        self.phase = np.empty((n, k))
+        self.row = 0
+        self._bi = 0  # index of the next break to reach
+        self._ci = 0
+        self.wall_time = 0.0
+
+    # --- the loop, one break at a time ---------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return self._bi >= len(self.breaks) and self.row > 0
+
+    @property
+    def is_control_tick(self) -> bool:
+        """Whether the present time is a controller tick (commands are due before advancing)."""
+        return self.sim.t in self._ticks
+
+    def apply_scene_commands(self) -> None:
+        """Apply the scene's scheduled commands due at or before the present time."""
+        while self._ci < len(self._cmds) and self._cmds[self._ci].time <= self.sim.t:
+            c = self._cmds[self._ci]
+            self.sim.set_stator(self.scene.stator_index(c.stator), current=c.current, rate=c.rate)
+            self._ci += 1
+
+    def record_initial(self) -> slice:
+        """Record the sample at t = 0 (after the scene's commands of t = 0). Returns its row slice."""
+        self.apply_scene_commands()
+        self.out_y[0], self.out_N[0] = self.sim.y, self.sim.torque()
+        self.cur[0], self.rate[0], self.phase[0] = self.sim.current, self.sim.rate, self.sim.phase
+        self.row = 1
+        if self.breaks and self.breaks[0] == 0.0:
+            self._bi = 1
+        return slice(0, 1)
+
+    def control_input(self):
+        """The state a control law sees now (gyro_ctl.laws.ControlInput)."""
+        from gyro_ctl.laws import ControlInput
+
+        sim = self.sim
+        L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
+        _, omega_b = body_rates(sim.J, L, q)
+        if not hasattr(self, "_axes"):
+            self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
+        return ControlInput(t=sim.t, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
+
+    def apply_commands(self, commands: dict) -> None:
+        """Apply ``{stator name: (current A, rate rad/s)}`` now (unknown names raise ValueError)."""
+        for name, (current, rate) in commands.items():
+            if name not in self.sim.stator_names:
+                raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
+            self.sim.set_stator(self.sim.stator_names.index(name), current=current, rate=rate)
+
+    def advance(self) -> slice:
+        """Integrate to the next break; returns the slice of the output rows written."""
+        if self.row == 0:
+            return self.record_initial()
+        tb = self.breaks[self._bi]
+        self._bi += 1
+        t_out, row = self.t_out, self.row
         sel = t_out[row:][t_out[row:] <= tb + 1e-12 * max(1.0, tb)]
+        sim = self.sim
         t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
         rows = slice(row, row + sel.size)
-        row = sim.advance(tb, sel, out_y, out_N, row)
-        cur[rows] = c0
-        rate[rows] = r0
-        phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
-    wall = time.perf_counter() - t0
-    L, q = out_y[:row, 0:3], out_y[:row, 3:7]
-    omega_b, eul, energy = derived_outputs(sim.J, L, q)
-    return RunResult(scene=scene, t=t_out[:row], L=L, q=q, omega_b=omega_b, euler=eul, torque=out_N[:row],
-                     energy=energy, stator_names=k, current=cur[:row], field_rate=rate[:row],
-                     field_phase=phase[:row], modes=out_y[:row, 7:], wall_time=wall, steps=sim.steps)
+        w0 = time.perf_counter()
+        self.row = sim.advance(tb, sel, self.out_y, self.out_N, row)
+        self.wall_time += time.perf_counter() - w0
+        self.cur[rows] = c0
+        self.rate[rows] = r0
+        self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
+        self.apply_scene_commands()
+        return rows
+
+    def samples(self, rows: slice) -> dict:
+        """Output rows as arrays: t, L, q, omega_b, euler, torque, energy, current, rate, phase."""
+        L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
+        omega_b, eul, energy = derived_outputs(self.sim.J, L, q)
+        return {"t": self.t_out[rows], "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
+                "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows]}
+
+    def result(self) -> RunResult:
+        s = self.samples(slice(0, self.row))
+        return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"], euler=s["euler"],
+                         torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
+                         current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
+                         modes=self.out_y[: self.row, 7:], wall_time=self.wall_time, steps=self.sim.steps)
+
+
+def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunResult:
+    """Run a scene in-process (no ROS) and return its time series at the scene's output rate.
+
+    A scene with a ``controller`` runs its law (gyro_ctl) at every tick. ``on_samples(dict)``, if
+    given, is called with each new chunk of output rows (see :meth:`Runner.samples`).
+    """
+    from gyro_ctl.laws import make_law
+
+    r = Runner(scene, duration)
+    law = make_law(scene.controller) if scene.controller is not None else None
+    w0 = time.perf_counter()
+    while not r.done:
+        if r.row > 0 and law is not None and r.is_control_tick:
+            r.apply_commands(law(r.control_input()))
+        rows = r.advance()
+        if on_samples is not None and rows.stop > rows.start:
+            on_samples(r.samples(rows))
+    r.wall_time = time.perf_counter() - w0
+    return r.result()
