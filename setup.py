@@ -28,7 +28,12 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
-        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name, 'resource/gyro_ctl']),
+        # `ros2 run gyro_sim simulator` and `ros2 run gyro_ctl controller` (gyro_ctl is indexed as a
+        # package of its own, sharing this package.xml)
+        ('lib/' + package_name, ['scripts/simulator']),
+        ('lib/gyro_ctl', ['scripts/controller']),
+        ('share/gyro_ctl', ['package.xml']),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
     ],
@@ -61,6 +66,7 @@ setup(
             'pytest>=7',
             'hypothesis>=6',
             'mpmath>=1.3',  # 50-digit reference values of [M] (2.13) in test_conductor
+            'mcap-ros2-support>=0.5',  # independent reader of recorded bags in test_recording
         ],
     },
     # numba's on-disk cache (cache=True) writes next to the modules: never zipped.
@@ -74,6 +80,8 @@ setup(
     entry_points={
         'console_scripts': [
             'gyro-sim = gyro_sim.cli:main',
+            'gyro-sim-simulator = gyro_sim.ros.simulator_node:main',
+            'gyro-ctl-controller = gyro_ctl.ros.controller_node:main',
         ],
     },
 )

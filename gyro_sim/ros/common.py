@@ -1,0 +1,94 @@
+"""Pieces shared by the simulator and controller nodes: message classes, QoS, command parsing, signals."""
+from __future__ import annotations
+
+import importlib
+import math
+import os
+import signal
+import threading
+from typing import Callable, Optional
+
+import yaml
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ..messages import QOS, stamp_ns
+from ..scene import Scene
+
+_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+def message_class(msgtype: str):
+    """rclpy message class of 'pkg/msg/Name'."""
+    pkg, _, name = msgtype.split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+def qos_profile(topic: str) -> QoSProfile:
+    """The QoS of a topic of the contract (:data:`gyro_sim.messages.QOS`)."""
+    q = QOS[topic]
+    return QoSProfile(depth=q["depth"], history=HistoryPolicy.KEEP_LAST, reliability=_RELIABILITY[q["reliability"]],
+                      durability=_DURABILITY[q["durability"]])
+
+
+def msg_time(header) -> float:
+    """Simulation time (s) of a header stamp, as stamp_ns · 1e-9 (the value the in-process loop uses)."""
+    return (header.stamp.sec * 1_000_000_000 + header.stamp.nanosec) * 1e-9
+
+
+def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
+    """Check a /gyro/stator_commands JointState; ((names, currents, rates|None, stamp_ns), '') or (None, reason).
+
+    name: known stators, no repeats; effort (current, A): one finite value ≥ 0 per name;
+    velocity (field rate, rad/s): empty (rates unchanged) or one finite value per name.
+    """
+    names = list(msg.name)
+    cur = list(msg.effort)
+    rate = list(msg.velocity)
+    if not names:
+        return None, "name is empty; expected stator names from " + str(stators)
+    unknown = [n for n in names if n not in stators]
+    if unknown:
+        return None, f"name = {names}: unknown stator {unknown[0]!r}; allowed: {stators}"
+    if len(set(names)) != len(names):
+        return None, f"name = {names}: a stator is named twice"
+    if len(cur) != len(names):
+        return None, f"effort = {cur}: one current (A) per name expected ({len(names)} names)"
+    for n, c in zip(names, cur):
+        if not (math.isfinite(c) and c >= 0):
+            return None, f"effort[{n}] = {c}: current must be finite and ≥ 0 A"
+    if rate and len(rate) != len(names):
+        return None, f"velocity = {rate}: empty or one rate (rad/s) per name expected"
+    for n, r in zip(names, rate):
+        if not math.isfinite(r):
+            return None, f"velocity[{n}] = {r}: field rate must be finite (rad/s)"
+    return (names, cur, rate or None, msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec), ""
+
+
+def scene_text_of(scene: Scene) -> str:
+    """The scene file's text (or a YAML dump of a scene built in memory)."""
+    if scene.source and os.path.isfile(scene.source):
+        with open(scene.source, encoding="utf-8") as f:
+            return f.read()
+    return yaml.safe_dump(scene.model_dump(exclude={"source"}), sort_keys=False)
+
+
+def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
+    """SIGINT/SIGTERM set ``stop`` (the loop ends cleanly and closes its bag). Returns a restore function."""
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def handler(signum, frame):
+        stop.set()
+
+    for s in old:
+        signal.signal(s, handler)
+
+    def restore():
+        for s, h in old.items():
+            signal.signal(s, h)
+
+    return restore
+
+
+__all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "scene_text_of", "stop_on_signals",
+           "stamp_ns"]
