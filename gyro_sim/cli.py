@@ -1,7 +1,10 @@
 """The ``gyro-sim`` command.
 
-    gyro-sim run SCENE [--duration S] [--out DIR]   simulate, summarise, plot
-    gyro-sim scenes                                 list the built-in scenes
+    gyro-sim run SCENE [--duration S] [--out DIR] [--record BAG] [--ros [--mode M]]
+    gyro-sim scenes                 list the built-in scenes
+    gyro-sim info BAG               topics, counts, duration, scene of a recorded run
+    gyro-sim plot BAG [--out PNG]   spin rate, θ, L and stator currents of a recorded run
+    gyro-sim replay BAG [--rate F]  publish a bag over ROS 2 with its timing; --check re-simulates it
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
@@ -51,7 +54,36 @@ def build_parser() -> argparse.ArgumentParser:
                      help="simulated time in seconds (default: the scene's duration)")
     run.add_argument("--out", metavar="DIR", type=Path, default=Path("runs"),
                      help="folder for the plot (default: runs/)")
+    run.add_argument("--record", metavar="BAG", type=Path, default=None,
+                     help="record the run as a rosbag2 bag (MCAP) in this new directory")
+    run.add_argument("--ros", action="store_true",
+                     help="run the simulator and controller nodes as separate ROS 2 processes (DDS on localhost)")
+    run.add_argument("--mode", choices=("lockstep", "realtime", "freerun"), default="lockstep",
+                     help="with --ros: timing mode of the simulator node (default: lockstep)")
+    run.add_argument("--rate-factor", metavar="F", type=float, default=1.0,
+                     help="with --ros --mode realtime: simulated seconds per wall second")
+    run.add_argument("--quiet", action="store_true", help="no progress line")
     run.set_defaults(func=_cmd_run)
+
+    info = sub.add_parser("info", help="describe a recorded bag",
+                          description="Topics with types and counts, duration, scene and version of a bag.")
+    info.add_argument("bag", metavar="BAG", type=Path)
+    info.set_defaults(func=_cmd_info)
+
+    plot = sub.add_parser("plot", help="plot a recorded bag",
+                          description="Write a PNG of spin rate, θ, L components and stator currents of a bag.")
+    plot.add_argument("bag", metavar="BAG", type=Path)
+    plot.add_argument("--out", metavar="PNG", type=Path, default=None, help="default: BAG/<scene>.png")
+    plot.set_defaults(func=_cmd_plot)
+
+    replay = sub.add_parser("replay", help="replay a bag over ROS 2, or re-simulate it (--check)",
+                            description="Publish every topic of BAG with its original timing (x --rate), /clock "
+                                        "included; with --check, re-simulate the bag's embedded scene with its "
+                                        "recorded commands and report the largest difference (expected 0).")
+    replay.add_argument("bag", metavar="BAG", type=Path)
+    replay.add_argument("--rate", metavar="F", type=float, default=1.0, help="playback speed factor (default 1)")
+    replay.add_argument("--check", action="store_true", help="re-simulate instead of publishing")
+    replay.set_defaults(func=_cmd_replay)
 
     scenes = sub.add_parser(
         "scenes",
@@ -114,26 +146,187 @@ def _error(message: str) -> int:
 
 # --- commands ---------------------------------------------------------------
 
+class _Progress:
+    """A one-line progress display on stderr (simulated time, real-time factor), for runs over 2 s wall."""
+
+    def __init__(self, total: float, enabled: bool):
+        import time
+
+        self.time = time
+        self.total, self.enabled = total, enabled
+        self.w0 = time.perf_counter()
+        self.last = self.w0
+        self.shown = False
+
+    def __call__(self, samples: dict) -> None:
+        now = self.time.perf_counter()
+        if not self.enabled or now - self.last < 1.0 or now - self.w0 < 2.0:
+            return
+        self.last = now
+        t = float(samples["t"][-1])
+        _write(sys.stderr, f"\r  t = {t:.6g} / {self.total:.6g} s  ({t / (now - self.w0):.3g}x real time)   ")
+        self.shown = True
+
+    def close(self) -> None:
+        if self.shown:
+            _write(sys.stderr, "\n")
+
+
 def _cmd_run(args) -> int:
     # Imported here so that --help works fast and without the numerical stack.
     from gyro_sim import plotting
     from gyro_sim import scene as scene_mod
     from gyro_sim import simulate
 
+    if args.record is not None and args.record.exists():
+        return _error(f"--record {args.record}: already exists; give a new directory")
     try:
         scene = scene_mod.load_scene(args.scene)
-        result = simulate.run(scene, duration=args.duration)
     except scene_mod.SceneError as exc:
         return _error(str(exc))
-
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem
+    if args.ros:
+        return _run_ros(args, scene, name)
+    progress = _Progress(args.duration or scene.duration, not args.quiet and sys.stderr.isatty())
+    try:
+        result = simulate.run(scene, duration=args.duration, on_samples=progress)
+    except scene_mod.SceneError as exc:
+        return _error(str(exc))
+    finally:
+        progress.close()
+    if args.record is not None:
+        from gyro_sim.recording import record_result
+
+        record_result(result, args.record)
     png = Path(args.out) / f"{name}.png"
     try:
         plotting.plot_run(result, png)
     except OSError as exc:
         return _error(f"cannot write the plot {png}: {exc.strerror or exc}")
     _write(sys.stdout, format_summary(name, result.summary(), png))
+    if args.record is not None:
+        _write(sys.stdout, f"{'bag':<16}  {args.record}\n")
     return EXIT_OK
+
+
+def _run_ros(args, scene, name) -> int:
+    """Both nodes as processes over DDS; the bag they record is summarised and plotted."""
+    import time
+
+    from gyro_sim.ros.launch import launch
+
+    bag = args.record or Path(args.out) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
+    src = scene.source or args.scene
+    code = launch(src, mode=args.mode, record=str(bag), duration=args.duration, rate_factor=args.rate_factor,
+                  with_controller=scene.controller is not None)
+    if code != 0:
+        return _error(f"the simulator node ended with status {code}")
+    return _summarise_bag(bag, Path(args.out) / f"{name}.png")
+
+
+def _bag_result(bag: Path):
+    """A RunResult-like view of a recorded bag (for the summary and the plot)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from gyro_sim.recording import bag_info, read_bag
+
+    b = read_bag(bag)
+    info = bag_info(bag)
+    J = None
+    try:
+        import yaml
+
+        J = np.array(yaml.safe_load(b.scene_text)["rotor"]["inertia"], dtype=float)
+    except Exception:
+        pass
+    energy = 0.5 * np.sum(b.omega_b**2 * J, axis=1) if J is not None else np.full(len(b.t), np.nan)
+    res = SimpleNamespace(t=b.t, L=b.L, q=b.q, omega_b=b.omega_b, euler=b.euler, current=b.current,
+                          stator_names=b.stator_names, scene=SimpleNamespace(name=b.scene_name or bag.name))
+    wall = info["custom"].get("gyro_sim.wall_time")
+    steps = info["custom"].get("gyro_sim.steps")
+    summary = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
+               "theta_deg": float(np.degrees(b.euler[-1, 1])), "L_norm": float(np.linalg.norm(b.L[-1])),
+               "energy": float(energy[-1]), "t_end": float(b.t[-1]),
+               "wall_time": float(wall) if wall else None, "steps": int(steps) if steps else None,
+               "realtime_factor": float(b.t[-1]) / float(wall) if wall else None}
+    return res, summary, b, info
+
+
+def _summarise_bag(bag: Path, png: Path) -> int:
+    from gyro_sim import plotting
+
+    try:
+        res, summary, b, info = _bag_result(bag)
+    except Exception as exc:  # a bag that cannot be read
+        return _error(f"cannot read the bag {bag}: {exc}")
+    plotting.plot_run(res, png)
+    _write(sys.stdout, format_summary(res.scene.name, summary, png))
+    _write(sys.stdout, f"{'bag':<16}  {bag} ({info['message_count']} messages)\n")
+    if b.status:
+        _write(sys.stdout, f"{'last status':<16}  {b.status[-1]}\n")
+    return EXIT_OK
+
+
+def _cmd_info(args) -> int:
+    from gyro_sim.recording import bag_info
+
+    try:
+        info = bag_info(args.bag)
+    except Exception as exc:
+        return _error(f"cannot read the bag {args.bag}: {exc}")
+    rows = [("bag", info["path"]), ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
+            ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
+            ("duration", f"{info['duration']:.6g} s (from {info['start']:.6g} to {info['end']:.6g} s)"),
+            ("messages", str(info["message_count"])), ("end", str(info["end_reason"]))]
+    shown = {"gyro_sim.scene_name", "gyro_sim.version", "gyro_sim.end", "gyro_sim.scene"}
+    for k, v in sorted(info["custom"].items()):
+        if k not in shown:
+            rows.append((k.removeprefix("gyro_sim."), str(v)))
+    width = max(len(r[0]) for r in rows)
+    _write(sys.stdout, "".join(f"{a:<{width}}  {b}\n" for a, b in rows))
+    tw = max(len(t) for t in info["topics"]) if info["topics"] else 0
+    for topic, ti in info["topics"].items():
+        _write(sys.stdout, f"  {topic:<{tw}}  {ti['type']:<34} {ti['count']:>8}\n")
+    return EXIT_OK
+
+
+def _cmd_plot(args) -> int:
+    from gyro_sim import plotting
+
+    try:
+        res, _, _, _ = _bag_result(args.bag)
+    except Exception as exc:
+        return _error(f"cannot read the bag {args.bag}: {exc}")
+    png = args.out or args.bag / f"{res.scene.name}.png"
+    plotting.plot_run(res, png)
+    _write(sys.stdout, f"plot: {png}\n")
+    return EXIT_OK
+
+
+def _cmd_replay(args) -> int:
+    if not (math.isfinite(args.rate) and args.rate > 0):
+        return _error(f"--rate {args.rate}: must be a positive number")
+    if args.check:
+        from gyro_sim.rerun import rerun_bag
+        from gyro_sim.scene import SceneError
+
+        try:
+            rep = rerun_bag(args.bag)
+        except (SceneError, OSError, ValueError) as exc:
+            return _error(str(exc))
+        d = rep["max_abs_diff"]
+        _write(sys.stdout, f"re-ran {rep['samples_rerun']} samples (bag: {rep['samples_recorded']}); largest |Δ|: "
+                           + ", ".join(f"{k} {v:.3g}" for k, v in d.items())
+                           + (" — identical to the bit\n" if rep["identical"] else " — NOT identical\n"))
+        return EXIT_OK if rep["identical"] else 1
+    import subprocess
+
+    from gyro_sim.ros.launch import ros_env
+
+    return subprocess.call([sys.executable, "-m", "gyro_sim.ros.replay", str(args.bag), repr(float(args.rate))],
+                           env=ros_env())
 
 
 def _cmd_scenes(args) -> int:

@@ -80,7 +80,8 @@ def plot_run(result, path) -> Path:
 
     Uses ``result.t`` (s), ``result.omega_b`` (rad/s, body frame),
     ``result.euler[:, 1]`` (θ, rad), ``result.current`` (A, one column per
-    stator), ``result.stator_names`` and ``result.scene.name`` (the title).
+    stator), ``result.stator_names``, ``result.scene.name`` (the title) and, if
+    present, ``result.L`` (N·m·s, case frame; a fourth panel).
 
     Args:
         result: the run to plot.
@@ -105,9 +106,17 @@ def plot_run(result, path) -> Path:
     scale, unit = _time_axis(float(t[-1] - t[0]) if len(t) else 0.0)
     ts = t / scale
 
-    fig = Figure(figsize=(10.0, 8.0), layout="constrained")
+    L = getattr(result, "L", None)
+    fig = Figure(figsize=(10.0, 10.0 if L is not None else 8.0), layout="constrained")
     FigureCanvasAgg(fig)
-    ax_spin, ax_theta, ax_cur = fig.subplots(3, 1, sharex=True)
+    axes = fig.subplots(4 if L is not None else 3, 1, sharex=True)
+    ax_spin, ax_theta, ax_cur = axes[0], axes[1], axes[-1]
+    if L is not None:
+        L = np.asarray(L, dtype=float).reshape(len(t), 3)
+        for j in range(3):
+            axes[2].plot(*decimate_minmax(ts, L[:, j]), color=f"C{j}", label=f"L{j + 1}")
+        axes[2].set_ylabel("L, case frame (N·m·s)")
+        axes[2].legend(loc="best")
     fig.suptitle(title)
 
     rev = 1.0 / (2.0 * math.pi)
@@ -131,7 +140,7 @@ def plot_run(result, path) -> Path:
     ax_cur.set_ylabel("stator current (A)")
     ax_cur.set_xlabel(f"time ({unit})")
 
-    for ax in (ax_spin, ax_theta, ax_cur):
+    for ax in axes:
         ax.grid(True, alpha=0.3)
 
     path.parent.mkdir(parents=True, exist_ok=True)

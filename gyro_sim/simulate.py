@@ -16,6 +16,7 @@ import numpy as np
 from . import kernels
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
+from .messages import stamp_ns
 from .scene import Scene, SceneError
 
 __all__ = ["Simulator", "RunResult", "run", "stator_triad"]
@@ -52,6 +53,7 @@ class RunResult:
     modes: np.ndarray  # (n,3N) eddy-mode states e_n, body frame, T
     wall_time: float = 0.0
     steps: int = 0
+    commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
 
     @property
     def spin_rate(self) -> np.ndarray:
@@ -305,11 +307,12 @@ class Runner:
         t_out = np.arange(int(math.floor(T / dt_out + 1e-9)) + 1) * dt_out
         if t_out[-1] < T * (1 - 1e-12):
             t_out = np.append(t_out, T)
-        self.t_out = t_out
         ctl = scene.controller
         self.period = (ctl.period or dt_out) if ctl is not None else None
         ticks = np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if ctl is not None else np.zeros(0)
         self._ticks = set(ticks.tolist())
+        # every controller tick is an output sample too: the controller (node) sees the published state
+        self.t_out = t_out = np.union1d(t_out, ticks)
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
         self.breaks = sorted(set(t_out.tolist()) | {c.time for c in self._cmds} | self._ticks | {T})
         n = t_out.size
@@ -320,6 +323,7 @@ class Runner:
         self.rate = np.empty((n, k))
         self.phase = np.empty((n, k))
         self.row = 0
+        self.command_log: list = []  # every command applied: (t, names, currents|None, rates|None)
         self._bi = 0  # index of the next break to reach
         self._ci = 0
         self.wall_time = 0.0
@@ -336,10 +340,13 @@ class Runner:
 
     def apply_scene_commands(self) -> None:
         """Apply the scene's scheduled commands due at or before the present time."""
+        due: dict = {}
         while self._ci < len(self._cmds) and self._cmds[self._ci].time <= self.sim.t:
             c = self._cmds[self._ci]
-            self.sim.set_stator(self.scene.stator_index(c.stator), current=c.current, rate=c.rate)
+            cur, rate = due.get(c.stator, (None, None))
+            due[c.stator] = (c.current if c.current is not None else cur, c.rate if c.rate is not None else rate)
             self._ci += 1
+        self.apply_commands(due)  # one command message per instant
 
     def record_initial(self) -> slice:
         """Record the sample at t = 0 (after the scene's commands of t = 0). Returns its row slice."""
@@ -360,7 +367,7 @@ class Runner:
         _, omega_b = body_rates(sim.J, L, q)
         if not hasattr(self, "_axes"):
             self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
-        return ControlInput(t=sim.t, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
+        return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
 
     def apply_commands(self, commands: dict) -> None:
         """Apply ``{stator name: (current A, rate rad/s)}`` now (unknown names raise ValueError)."""
@@ -368,6 +375,9 @@ class Runner:
             if name not in self.sim.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
             self.sim.set_stator(self.sim.stator_names.index(name), current=current, rate=rate)
+        if commands:
+            names = list(commands)
+            self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
 
     def advance(self) -> slice:
         """Integrate to the next break; returns the slice of the output rows written."""
@@ -401,7 +411,8 @@ class Runner:
         return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"], euler=s["euler"],
                          torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
                          current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
-                         modes=self.out_y[: self.row, 7:], wall_time=self.wall_time, steps=self.sim.steps)
+                         modes=self.out_y[: self.row, 7:], wall_time=self.wall_time, steps=self.sim.steps,
+                         commands=list(self.command_log))
 
 
 def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunResult:

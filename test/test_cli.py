@@ -113,7 +113,7 @@ def fakes(monkeypatch, tmp_path):
     def builtin_scenes():
         return {name: tmp_path / f"{name}.yaml" for name in SCENES}
 
-    def run(scene, duration=None):
+    def run(scene, duration=None, on_samples=None):
         calls["run"].append((scene, duration))
         return fake_result(scene, duration)
 
@@ -220,7 +220,7 @@ def test_scene_error_exits_2_with_message_and_no_traceback(fakes, tmp_path, caps
 
 
 def test_scene_error_raised_by_the_simulator_also_exits_2(fakes, monkeypatch, tmp_path, capsys):
-    def bad_run(scene, duration=None):
+    def bad_run(scene, duration=None, on_samples=None):
         raise FakeSceneError("stator 'x' has no coils")
     monkeypatch.setattr(sys.modules["gyro_sim.simulate"], "run", bad_run)
     assert cli.main(["run", "steer_solid", "--out", str(tmp_path)]) == 2

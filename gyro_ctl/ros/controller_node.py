@@ -13,6 +13,7 @@ import threading
 
 import numpy as np
 import rclpy
+from rclpy.exceptions import ParameterException
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -148,7 +149,7 @@ def main(args=None) -> int:
     try:
         try:
             node = ControllerNode()
-        except SceneError as e:
+        except (SceneError, ParameterException) as e:
             print(f"controller: error: {e}", file=sys.stderr)
             return 2
         while not stop.is_set() and rclpy.ok():

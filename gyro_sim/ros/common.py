@@ -8,11 +8,9 @@ import signal
 import threading
 from typing import Callable, Optional
 
-import yaml
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..messages import QOS, stamp_ns
-from ..scene import Scene
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
@@ -65,14 +63,6 @@ def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     return (names, cur, rate or None, msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec), ""
 
 
-def scene_text_of(scene: Scene) -> str:
-    """The scene file's text (or a YAML dump of a scene built in memory)."""
-    if scene.source and os.path.isfile(scene.source):
-        with open(scene.source, encoding="utf-8") as f:
-            return f.read()
-    return yaml.safe_dump(scene.model_dump(exclude={"source"}), sort_keys=False)
-
-
 def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
     """SIGINT/SIGTERM set ``stop`` (the loop ends cleanly and closes its bag). Returns a restore function."""
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -90,5 +80,5 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
     return restore
 
 
-__all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "scene_text_of", "stop_on_signals",
+__all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "stop_on_signals",
            "stamp_ns"]

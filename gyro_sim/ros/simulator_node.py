@@ -26,18 +26,18 @@ from typing import Optional
 
 import numpy as np
 import rclpy
+from rclpy.exceptions import ParameterException
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
 
-from .. import __version__
 from ..messages import (TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS,
                         TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, stamp_ns, state_messages,
                         status_message, to_ros)
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
-from .common import message_class, parse_command, qos_profile, scene_text_of, stop_on_signals
+from .common import message_class, parse_command, qos_profile, stop_on_signals
 
 MODES = ("lockstep", "realtime", "freerun")
 STATE_TOPICS = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_CLOCK)
@@ -101,7 +101,10 @@ class SimulatorNode(Node):
         self.commands.put((msg, time.perf_counter()))
 
     def publish_status(self, text: str, warn: bool = False) -> None:
-        (self.get_logger().warning if warn else self.get_logger().info)(text)
+        if warn:  # rclpy ties one severity to each call site
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
         self.pubs[TOPIC_STATUS].publish(to_ros(message_class(TOPICS[TOPIC_STATUS]), status_message(text)))
 
     def publish_samples(self, s: dict, names: list) -> None:
@@ -124,10 +127,9 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     expect_commands = scene.controller is not None
     recorder = None
     if p["record"]:
-        from ..recording import BagRecorder
+        from ..recording import BagRecorder, scene_text
 
-        recorder = BagRecorder(p["record"], scene_text_of(scene), scene.name,
-                               extra={"mode": p["mode"], "gyro_sim_version": __version__})
+        recorder = BagRecorder(p["record"], scene_text(scene), scene.name, extra={"gyro_sim.mode": p["mode"]})
     mode, factor = p["mode"], p["rate_factor"]
     wd = p["watchdog_timeout"]
     last_cmd_wall = time.perf_counter()
@@ -191,7 +193,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
         nm, cur, rate, stamp = cmd
         runner.apply_commands({n: (cur[i], rate[i] if rate is not None else None) for i, n in enumerate(nm)})
         if recorder is not None:
-            recorder.write_command(runner.sim.t, nm, cur, rate if rate is not None else [math.nan] * len(nm))
+            recorder.write_command(runner.sim.t, nm, cur, rate)
 
     try:
         status(f"simulator: scene {scene.name!r}, mode {mode}, duration {runner.T} s"
@@ -203,6 +205,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
                     timeout = wd if have_cmd else p["startup_timeout"]
                     if drain(stamp_ns(runner.sim.t), timeout if timeout > 0 else math.inf):
                         apply(latest)
+                    latest = None  # applied, or stale (another tick's)
                 else:
                     drain(None, 0.0)
                     if latest is not None:
@@ -210,7 +213,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
                         latest = None
                 if expect_commands and wd > 0 and not watchdog_fired and time.perf_counter() - last_cmd_wall > wd:
                     watchdog_fired = True
-                    runner.apply_commands({n: (0.0, None) for n in names})
+                    apply((names, [0.0] * len(names), None, None))  # recorded like any command (re-run check)
                     status(f"watchdog: no command for {wd:g} s; all stator currents set to 0 A", warn=True)
             rows = runner.advance()
             if stop.is_set() and rows.stop == rows.start:
@@ -229,6 +232,13 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
                     stop.wait(ahead)
         wall = time.perf_counter() - wall0
         lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
+        if recorder is not None:
+            for k, v in (("wall_time", wall), ("steps", runner.sim.steps), ("duration", runner.sim.t),
+                         ("control_ticks_per_s", n_ticks / wall), ("latency_median_s", float(np.median(lat))),
+                         ("latency_p99_s", float(np.percentile(lat, 99)))):
+                recorder.set_custom(f"gyro_sim.{k}", v)
+            if stop.is_set():
+                recorder.interrupted("signal")
         status(f"done: t = {runner.sim.t:g} s in {wall:.3f} s wall ({runner.sim.t / wall:.1f}x real time), "
                f"{n_ticks} control ticks ({n_ticks / wall:.1f}/s), {runner.sim.steps} steps, "
                f"{refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
@@ -250,7 +260,7 @@ def main(args=None) -> int:
     try:
         try:
             node = SimulatorNode()
-        except SceneError as e:
+        except (SceneError, ParameterException) as e:
             print(f"simulator: error: {e}", file=sys.stderr)
             return 2
         executor = SingleThreadedExecutor()

@@ -1,0 +1,553 @@
+"""Recording runs as rosbag2 bags (MCAP storage) without ROS, and reading them back.
+
+Written with the ``rosbags`` library's rosbag2 :class:`~rosbags.rosbag2.Writer` (format
+version 8, MCAP storage): a directory ``PATH/`` holding ``PATH.mcap`` (profile ``ros2``,
+``ros2msg`` schemas, ``cdr`` messages, ``offered_qos_profiles`` on every channel, a summary
+with statistics) and ``metadata.yaml`` — readable by ``ros2 bag info/play`` (Humble and
+later), Foxglove and rosbags. Topics and message content are :mod:`gyro_sim.messages`
+(the same contract the ROS nodes publish); the log time of every message is its stamp
+(simulation time, ns).
+
+The scene and the package version are stored twice:
+
+* in the rosbag2 ``custom_data`` (``metadata.yaml``, and the same YAML inside the MCAP file's
+  ``rosbag2`` metadata record that ``ros2 bag`` reads): keys ``gyro_sim.version``,
+  ``gyro_sim.scene_name``, ``gyro_sim.scene`` (the scene file text), ``gyro_sim.end``
+  (``complete`` or ``interrupted: <exception>``) and any ``extra`` keys;
+* as one latched message on ``/gyro/scene`` (std_msgs/String, transient_local depth 1), so a
+  player or Foxglove that ignores custom_data still gets the scene.
+
+rosbags' MCAP writer has no API for MCAP metadata records of one's own (it writes exactly one,
+``rosbag2``), hence this choice.
+
+Use::
+
+    with BagRecorder("runs/bag1", scene_text, "spinup") as rec:   # refuses an existing path
+        rec.write_sample(t, L, q, omega_b, euler, torque, names, current, rate, phase)
+    record_result(gyro_sim.run(scene), "runs/bag2")
+    data = read_bag("runs/bag2"); data.t, data.L, data.scene_text
+"""
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import signal
+import threading
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterator, Mapping, Optional, Sequence, Union
+
+import numpy as np
+import yaml
+
+from . import __version__
+from .messages import (
+    QOS, TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS,
+    TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, command_message, scene_message, stamp_ns,
+    state_messages, status_message, to_rosbags,
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .simulate import RunResult
+
+__all__ = ["BagRecorder", "BagData", "record_result", "scene_text", "read_bag", "bag_info", "sigterm_as_interrupt",
+           "BAG_VERSION", "CUSTOM_KEYS"]
+
+BAG_VERSION = 8  # rosbag2 metadata format version: the newest that ROS 2 Humble reads
+_PREFIX = "gyro_sim."
+#: custom_data keys written by the recorder
+CUSTOM_KEYS = {
+    "version": _PREFIX + "version",
+    "scene_name": _PREFIX + "scene_name",
+    "scene": _PREFIX + "scene",
+    "end": _PREFIX + "end",
+}
+
+_TYPESTORE = None
+
+
+def _typestore():
+    """The rosbags typestore (ROS 2 Humble definitions; identical hashes in Jazzy for our types)."""
+    global _TYPESTORE
+    if _TYPESTORE is None:
+        from rosbags.typesys import Stores, get_typestore
+
+        _TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
+    return _TYPESTORE
+
+
+def _qos(topic: str):
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    q = QOS[topic]
+    zero = QosTime(0, 0)  # unspecified = the RMW default (infinite)
+    return Qos(
+        history=QosHistory[q["history"].upper()],
+        depth=int(q["depth"]),
+        reliability=QosReliability[q["reliability"].upper()],
+        durability=QosDurability[q["durability"].upper()],
+        deadline=zero,
+        lifespan=zero,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=zero,
+        avoid_ros_namespace_conventions=False,
+    )
+
+
+# --- signals ----------------------------------------------------------------------------------
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM raises KeyboardInterrupt (as Ctrl-C does), so ``finally`` /
+    ``with BagRecorder`` close the bag. Main thread only (elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def _raise(signum, frame):
+        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+    old = signal.signal(signal.SIGTERM, _raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM while the bag's index and metadata are written (a second Ctrl-C
+    must not leave a half-closed file); delivered to the previous handlers afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    sigs = [signal.SIGINT, signal.SIGTERM]
+    old = {}
+    for s in sigs:
+        # a handler installed outside Python (getsignal() is None, e.g. rclpy's) is left alone:
+        # it could not be put back
+        if signal.getsignal(s) is None:
+            continue
+        try:
+            old[s] = signal.signal(s, lambda signum, frame: pending.append(signum))
+        except (ValueError, OSError):  # pragma: no cover - not settable here
+            pass
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        for s in dict.fromkeys(pending):
+            signal.raise_signal(s)
+
+
+# --- writing ----------------------------------------------------------------------------------
+
+class BagRecorder:
+    """Writes one rosbag2 bag (MCAP) of a run: a context manager, closable from ``finally``.
+
+    ``path`` is the bag directory to create; it must not exist (refused with FileExistsError
+    before anything is written). ``scene_text`` is the scene file's text, ``scene_name`` its
+    name, ``extra`` more custom_data entries (str → str/number).
+
+    Leaving the ``with`` block, normally or by an exception (KeyboardInterrupt included),
+    closes the bag: everything written so far is in a complete, indexed file; custom_data
+    ``gyro_sim.end`` says ``complete`` or ``interrupted: <exception>``. The scene message is
+    logged at the time of the first message written (t = 0 if none). Thread-safe.
+    """
+
+    def __init__(self, path: Union[str, os.PathLike], scene_text: str, scene_name: str,
+                 extra: Optional[Mapping[str, Any]] = None):
+        from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+
+        self._writer = None
+        if not isinstance(scene_text, str):
+            raise TypeError(f"BagRecorder: scene_text must be the scene file text (str), got {type(scene_text).__name__}")
+        if not isinstance(scene_name, str) or not scene_name:
+            raise ValueError(f"BagRecorder: scene_name must be a non-empty str, got {scene_name!r}")
+        custom = {
+            CUSTOM_KEYS["version"]: str(__version__),
+            CUSTOM_KEYS["scene_name"]: scene_name,
+            CUSTOM_KEYS["scene"]: scene_text,
+        }
+        for k, v in (extra or {}).items():
+            if not isinstance(k, str) or not k:
+                raise ValueError(f"BagRecorder: extra key {k!r}: must be a non-empty str")
+            if k in custom or k == CUSTOM_KEYS["end"]:
+                raise ValueError(f"BagRecorder: extra key {k!r} is reserved for the recorder")
+            if isinstance(v, bool) or not isinstance(v, (str, int, float)):
+                raise ValueError(f"BagRecorder: extra[{k!r}] = {v!r}: must be a str or a number")
+            custom[k] = str(v)
+        path = Path(path)
+        if path.exists() or path.is_symlink():
+            raise FileExistsError(
+                f"bag output {str(path)!r} already exists; refusing to overwrite it "
+                "(choose a new path or remove the old bag)")
+        self.path = path
+        ts = _typestore()
+        self._ts = ts
+        writer = Writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        for k, v in custom.items():
+            writer.set_custom_data(k, v)
+        try:
+            writer.open()
+        except WriterError as e:  # created by someone else since the check above
+            raise FileExistsError(f"bag output {str(path)!r}: {e}") from None
+        try:
+            self._conns = {
+                topic: writer.add_connection(topic, msgtype, typestore=ts, offered_qos_profiles=[_qos(topic)])
+                for topic, msgtype in TOPICS.items()
+            }
+        except BaseException:
+            writer.abort()
+            shutil.rmtree(path, ignore_errors=True)
+            raise
+        self._lock = threading.Lock()
+        self._scene_fields = scene_message(scene_text)
+        self._scene_written = False
+        self._end = "complete"
+        self.counts = {topic: 0 for topic in TOPICS}
+        self._writer = writer
+
+    # --- context manager
+    def __enter__(self) -> "BagRecorder":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is not None:
+            self._end = f"interrupted: {exc_type.__name__}" + (f" ({exc})" if str(exc) else "")
+        self.close()
+        return False
+
+    def __del__(self):  # last resort: an unclosed recorder still leaves a readable bag
+        try:
+            if getattr(self, "_writer", None) is not None:
+                self._end = "interrupted: not closed"
+                self.close()
+        except Exception:
+            pass
+
+    @property
+    def closed(self) -> bool:
+        return self._writer is None
+
+    def set_custom(self, key: str, value: Any) -> None:
+        """Add or replace a custom_data entry (str → str/number) before close, e.g. wall time at the end."""
+        if not isinstance(key, str) or not key or key in CUSTOM_KEYS.values():
+            raise ValueError(f"custom_data key {key!r}: must be a non-empty str not reserved by the recorder")
+        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+            raise ValueError(f"custom_data[{key!r}] = {value!r}: must be a str or a number")
+        with self._lock:
+            if self._writer is None:
+                raise RuntimeError(f"bag {str(self.path)!r} is closed")
+            self._writer.set_custom_data(key, str(value))
+
+    # --- writing
+    def _serialize(self, topic: str, fields: dict) -> memoryview:
+        msgtype = TOPICS[topic]
+        return self._ts.serialize_cdr(to_rosbags(self._ts, msgtype, fields), msgtype)
+
+    def _write(self, ns: int, items: Sequence[tuple[str, Any]]) -> None:
+        """Write serialized (topic, data) pairs at log time ns (all or, on a bad argument, none)."""
+        with self._lock:
+            w = self._writer
+            if w is None:
+                raise RuntimeError(f"bag {str(self.path)!r} is closed")
+            if not self._scene_written:
+                w.write(self._conns[TOPIC_SCENE], ns, self._serialize(TOPIC_SCENE, self._scene_fields))
+                self.counts[TOPIC_SCENE] += 1
+                self._scene_written = True
+            for topic, data in items:
+                w.write(self._conns[topic], ns, data)
+                self.counts[topic] += 1
+
+    def write_sample(self, t: float, L: Any, q: Any, omega_b: Any, euler: Any, torque: Any,
+                     names: Sequence[str], current: Any, rate: Any, phase: Any) -> None:
+        """One output sample at simulation time t (s): /clock, imu, kinetic_moment, euler, torque,
+        stators. q is (w, x, y, z), body → case; see :func:`gyro_sim.messages.state_messages`."""
+        msgs = state_messages(t, L, q, omega_b, euler, torque, names, current, rate, phase)
+        ns = stamp_ns(t)
+        self._write(ns, [(topic, self._serialize(topic, f)) for topic, f in msgs.items()])
+
+    def write_command(self, t: float, names: Sequence[str], current: Optional[Any], rate: Optional[Any]) -> None:
+        """A stator command at time t: currents (A) and/or signed rates (rad/s) of the named stators."""
+        data = self._serialize(TOPIC_STATOR_COMMANDS, command_message(t, names, current, rate))
+        self._write(stamp_ns(t), [(TOPIC_STATOR_COMMANDS, data)])
+
+    def write_status(self, t: float, text: str) -> None:
+        """A status text (watchdog, refusal, info) logged at time t."""
+        data = self._serialize(TOPIC_STATUS, status_message(text))
+        self._write(stamp_ns(t), [(TOPIC_STATUS, data)])
+
+    def interrupted(self, reason: str) -> None:
+        """Mark the run as ended early (custom_data ``gyro_sim.end`` = ``interrupted: <reason>``)."""
+        self._end = f"interrupted: {reason}"
+
+    def close(self) -> None:
+        """Finish the bag (index, summary, metadata.yaml). Idempotent."""
+        with self._lock:
+            w = self._writer
+            if w is None:
+                return
+            with _signals_deferred():
+                try:
+                    if not self._scene_written:
+                        w.write(self._conns[TOPIC_SCENE], 0, self._serialize(TOPIC_SCENE, self._scene_fields))
+                        self.counts[TOPIC_SCENE] += 1
+                        self._scene_written = True
+                    w.set_custom_data(CUSTOM_KEYS["end"], self._end)
+                    w.close()
+                except BaseException:
+                    w.abort()
+                    raise
+                finally:
+                    self._writer = None
+
+
+def scene_text(scene) -> str:
+    """The scene's file text if the file still says exactly this scene, else a YAML dump of it."""
+    from .scene import SceneError, scene_from_dict
+
+    src = getattr(scene, "source", None)
+    if src:
+        try:
+            text = Path(src).read_text(encoding="utf-8")
+            again = scene_from_dict(yaml.safe_load(text), where=src, default_name=Path(src).stem)
+            if again.model_dump(exclude={"source"}) == scene.model_dump(exclude={"source"}):
+                return text
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, SceneError, AttributeError):
+            pass
+    return yaml.safe_dump(scene.model_dump(mode="json", exclude={"source"}), sort_keys=False, allow_unicode=True)
+
+
+def _command_values(values: Sequence[Optional[float]]) -> Optional[list]:
+    """A command field: None (left empty) if no stator sets it, else floats with NaN = not set."""
+    if all(v is None for v in values):
+        return None
+    return [math.nan if v is None else float(v) for v in values]
+
+
+def record_result(result: "RunResult", path: Union[str, os.PathLike],
+                  extra: Optional[Mapping[str, Any]] = None) -> Path:
+    """Write a whole in-process :class:`~gyro_sim.simulate.RunResult` as a bag at ``path``.
+
+    Every sample goes to the state topics; every command the run applied (the scene's schedule
+    and the controller's, ``result.commands``) goes to ``/gyro/stator_commands`` at the time it
+    was applied (a field no stator sets is left empty; NaN marks a stator that does not set it). The scene text is the scene file (when
+    ``scene.source`` still holds exactly this scene; otherwise, e.g. after overrides, the
+    validated scene dumped to YAML). Returns the bag directory.
+    """
+    scene = result.scene
+    text = scene_text(scene)
+    names = list(result.stator_names)
+    n = len(result.t)
+    ns = [stamp_ns(t) for t in result.t.tolist()]  # validates every stamp before writing
+    t_end = float(result.t[-1]) if n else 0.0
+    # every command the run applied (scene schedule and controller), at the time it applied it
+    groups = [(float(t), list(nm), _command_values(cur), _command_values(rate))
+              for t, nm, cur, rate in getattr(result, "commands", []) if t < t_end]
+    ext = {"gyro_sim.duration": repr(t_end), "gyro_sim.steps": int(result.steps),
+           "gyro_sim.wall_time": float(result.wall_time)}
+    ext.update(extra or {})
+    rows = (result.t.tolist(), result.L.tolist(), result.q.tolist(), result.omega_b.tolist(),
+            result.euler.tolist(), result.torque.tolist(), result.current.tolist(),
+            result.field_rate.tolist(), result.field_phase.tolist())
+    with BagRecorder(path, text, scene.name, extra=ext) as rec:
+        gi = 0
+        for i, (t, L, q, w, e, N, I, r, ph) in enumerate(zip(*rows)):
+            # a sample at a command's time is taken before the command (simulate.run)
+            while gi < len(groups) and groups[gi][0] < t:
+                rec.write_command(*groups[gi])
+                gi += 1
+            rec.write_sample(t, L, q, w, e, N, names, I, r, ph)
+        for g in groups[gi:]:
+            rec.write_command(*g)
+    return Path(path)
+
+
+# --- reading ----------------------------------------------------------------------------------
+
+@dataclass
+class BagData:
+    """A bag read back: NumPy arrays per topic (SI; rows = samples).
+
+    Samples are aligned on the union of the state topics' header stamps (NaN where a topic
+    has no message at a stamp; none in bags written by this module). ``q`` is (w, x, y, z).
+    Command arrays have one column per stator (``stator_names`` order; NaN = not commanded).
+    """
+
+    t_ns: np.ndarray  # (n,) int64 header stamps, ns
+    t: np.ndarray  # (n,) s
+    L: np.ndarray  # (n,3) N·m·s, case frame
+    q: np.ndarray  # (n,4) (w, x, y, z), body → case
+    omega_b: np.ndarray  # (n,3) rad/s, body frame
+    euler: np.ndarray  # (n,3) ψ, θ, φ rad
+    torque: np.ndarray  # (n,3) N·m, case frame
+    stator_names: list[str]
+    current: np.ndarray  # (n,k) A
+    rate: np.ndarray  # (n,k) rad/s
+    phase: np.ndarray  # (n,k) rad
+    command_t: np.ndarray  # (m,) s
+    command_current: np.ndarray  # (m,k) A
+    command_rate: np.ndarray  # (m,k) rad/s
+    status_t: np.ndarray  # (s,) s (log time)
+    status: list[str]
+    clock_t: np.ndarray  # (c,) s
+    scene_text: Optional[str]
+    scene_name: Optional[str]
+    version: Optional[str]
+    custom: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def _custom_data(reader, path: Path) -> dict:
+    """custom_data of a bag directory (metadata.yaml), or of a bare .mcap file (its rosbag2 record)."""
+    meta = getattr(getattr(reader, "storage", None), "metadata", None)
+    custom = getattr(meta, "custom", None)
+    if custom:
+        return dict(custom)
+    if path.is_file():
+        try:
+            from mcap.reader import make_reader
+
+            with open(path, "rb") as f:
+                for m in make_reader(f).iter_metadata():
+                    if m.name == "rosbag2" and "serialized_metadata" in m.metadata:
+                        info = yaml.safe_load(m.metadata["serialized_metadata"]) or {}
+                        return dict(info.get("custom_data") or {})
+        except Exception:
+            return {}
+    return {}
+
+
+def _ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def read_bag(path: Union[str, os.PathLike]) -> BagData:
+    """Read a gyro_sim bag (a bag directory or its .mcap file) with rosbags into :class:`BagData`."""
+    from rosbags.rosbag2 import Reader
+
+    path = Path(path)
+    ts = _typestore()
+    des = ts.deserialize_cdr
+    acc: dict[str, tuple[list, list]] = {t: ([], []) for t in (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER,
+                                                                 TOPIC_TORQUE, TOPIC_STATORS)}
+    cmd: list = []
+    status_t: list[int] = []
+    status: list[str] = []
+    clock: list[int] = []
+    scene_text = None
+    with Reader(path) as reader:
+        custom = _custom_data(reader, path)
+        conns = [c for c in reader.connections if c.topic in TOPICS and c.msgtype == TOPICS[c.topic]]
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            topic = conn.topic
+            m = des(raw, conn.msgtype)
+            if topic == TOPIC_IMU:
+                o, w = m.orientation, m.angular_velocity
+                a = acc[topic]
+                a[0].append(_ns(m.header.stamp))
+                a[1].append((o.w, o.x, o.y, o.z, w.x, w.y, w.z))
+            elif topic in (TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE):
+                v = m.vector
+                a = acc[topic]
+                a[0].append(_ns(m.header.stamp))
+                a[1].append((v.x, v.y, v.z))
+            elif topic == TOPIC_STATORS:
+                a = acc[topic]
+                a[0].append(_ns(m.header.stamp))
+                a[1].append((list(m.name), m.effort, m.velocity, m.position))
+            elif topic == TOPIC_STATOR_COMMANDS:
+                cmd.append((_ns(m.header.stamp), list(m.name), m.effort, m.velocity))
+            elif topic == TOPIC_STATUS:
+                status_t.append(log_ns)
+                status.append(m.data)
+            elif topic == TOPIC_CLOCK:
+                clock.append(_ns(m.clock))
+            elif topic == TOPIC_SCENE:
+                scene_text = m.data
+    if scene_text is None:
+        scene_text = custom.get(CUSTOM_KEYS["scene"])
+    # --- align the state topics on the union of their stamps
+    all_ns = [np.asarray(a[0], dtype=np.int64) for a in acc.values()]
+    t_ns = np.unique(np.concatenate(all_ns)) if any(x.size for x in all_ns) else np.zeros(0, np.int64)
+    n = t_ns.size
+
+    def aligned(topic: str, width: int) -> np.ndarray:
+        ns_list, vals = acc[topic]
+        out = np.full((n, width), np.nan)
+        if ns_list:
+            out[np.searchsorted(t_ns, np.asarray(ns_list, dtype=np.int64))] = np.asarray(vals, dtype=float)
+        return out
+
+    imu = aligned(TOPIC_IMU, 7)
+    names: list[str] = []  # stator columns: in order of first appearance (samples, then commands)
+    seen_lists = dict.fromkeys([tuple(v[0]) for v in acc[TOPIC_STATORS][1]] + [tuple(c[1]) for c in cmd])
+    for nm_list in seen_lists:
+        for nm in nm_list:
+            if nm not in names:
+                names.append(nm)
+    k = len(names)
+    col = {nm: i for i, nm in enumerate(names)}
+    st = np.full((3, n, k), np.nan)
+    if acc[TOPIC_STATORS][0]:
+        rows = np.searchsorted(t_ns, np.asarray(acc[TOPIC_STATORS][0], dtype=np.int64))
+        for r, (nm, eff, vel, pos) in zip(rows.tolist(), acc[TOPIC_STATORS][1]):
+            cols = [col[x] for x in nm]
+            for j, arr in enumerate((eff, vel, pos)):
+                if len(arr) == len(cols):
+                    st[j, r, cols] = arr
+    m = len(cmd)
+    cc = np.full((2, m, k), np.nan)
+    for i, (_, nm, eff, vel) in enumerate(cmd):
+        cols = [col[x] for x in nm]
+        for j, arr in enumerate((eff, vel)):
+            if len(arr) == len(cols):
+                cc[j, i, cols] = arr
+    return BagData(
+        t_ns=t_ns, t=t_ns / 1e9, L=aligned(TOPIC_KINETIC_MOMENT, 3), q=imu[:, 0:4], omega_b=imu[:, 4:7],
+        euler=aligned(TOPIC_EULER, 3), torque=aligned(TOPIC_TORQUE, 3), stator_names=names,
+        current=st[0], rate=st[1], phase=st[2],
+        command_t=np.asarray([c[0] for c in cmd], dtype=np.int64) / 1e9, command_current=cc[0], command_rate=cc[1],
+        status_t=np.asarray(status_t, dtype=np.int64) / 1e9, status=status,
+        clock_t=np.asarray(clock, dtype=np.int64) / 1e9,
+        scene_text=scene_text, scene_name=custom.get(CUSTOM_KEYS["scene_name"]),
+        version=custom.get(CUSTOM_KEYS["version"]), custom=custom,
+    )
+
+
+def bag_info(path: Union[str, os.PathLike]) -> dict:
+    """Summary of a bag without reading its messages: topics (type, count), times (s), scene, version."""
+    from rosbags.rosbag2 import Reader
+
+    path = Path(path)
+    bag_version, storage = None, path.suffix.lstrip(".")
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        info = (yaml.safe_load((path / "metadata.yaml").read_text()) or {}).get("rosbag2_bagfile_information") or {}
+        bag_version, storage = info.get("version"), info.get("storage_identifier")
+    with Reader(path) as reader:
+        custom = _custom_data(reader, path)
+        count = reader.message_count
+        start = reader.start_time / 1e9 if count else math.nan
+        end = (reader.end_time - 1) / 1e9 if count else math.nan
+        topics = {name: {"type": ti.msgtype, "count": int(ti.msgcount)} for name, ti in sorted(reader.topics.items())}
+    return {
+        "path": str(path),
+        "storage": storage,
+        "bag_version": bag_version,
+        "message_count": int(count),
+        "start": start,
+        "end": end,
+        "duration": (end - start) if count else 0.0,
+        "topics": topics,
+        "scene_name": custom.get(CUSTOM_KEYS["scene_name"]),
+        "version": custom.get(CUSTOM_KEYS["version"]),
+        "end_reason": custom.get(CUSTOM_KEYS["end"]),
+        "custom": {k: v for k, v in custom.items() if k != CUSTOM_KEYS["scene"]},
+    }

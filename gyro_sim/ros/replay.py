@@ -1,0 +1,87 @@
+"""Replay a recorded bag over ROS 2: every topic with its original timing (× a rate factor), /clock included.
+
+The messages are published as recorded (serialized CDR, no conversion), so a controller, a plotter
+or ``ros2 topic echo`` sees exactly what the simulator published.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.node import Node
+from rosbags.rosbag2 import Reader
+
+from ..messages import QOS, TOPICS
+from .common import message_class, qos_profile, stop_on_signals
+
+
+def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 5.0) -> None:
+    """Wait (≤ timeout) until every subscriber already in the graph is matched to our publishers.
+
+    Messages published before a reliable subscriber is matched are lost, so the first samples of a
+    replay would be dropped without this.
+    """
+    end = time.perf_counter() + timeout
+    time.sleep(0.2)
+    while time.perf_counter() < end and not stop.is_set():
+        if all(p.get_subscription_count() >= node.count_subscribers(p.topic_name) for p in pubs):
+            return
+        time.sleep(0.05)
+
+
+def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None) -> int:
+    """Publish the bag's messages in log-time order, paced to the wall clock × ``rate``. Returns the count."""
+    stop = stop or threading.Event()
+    node = Node("gyro_replay")
+    try:
+        with Reader(Path(bag)) as reader:
+            pubs = {}
+            for c in reader.connections:
+                qos = qos_profile(c.topic) if c.topic in QOS else 10
+                pubs[c.id] = node.create_publisher(message_class(c.msgtype), c.topic, qos)
+            _wait_for_matches(node, pubs.values(), stop)
+            n = 0
+            t0_log = None
+            wall0 = time.perf_counter()
+            for conn, t_log, raw in reader.messages():
+                if stop.is_set():
+                    break
+                if t0_log is None:
+                    t0_log = t_log
+                ahead = wall0 + (t_log - t0_log) * 1e-9 / rate - time.perf_counter()
+                if ahead > 0:
+                    stop.wait(ahead)
+                pubs[conn.id].publish(bytes(raw))
+                n += 1
+            return n
+    finally:
+        node.destroy_node()
+
+
+def main(argv=None) -> int:
+    """``python -m gyro_sim.ros.replay BAG [RATE]``."""
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv:
+        print("usage: python -m gyro_sim.ros.replay BAG [RATE]", file=sys.stderr)
+        return 2
+    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    try:
+        n = replay(argv[0], float(argv[1]) if len(argv) > 1 else 1.0, stop)
+        print(f"replay: published {n} messages from {argv[0]}", file=sys.stderr)
+        return 0
+    finally:
+        restore()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["replay", "main", "TOPICS"]

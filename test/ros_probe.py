@@ -1,0 +1,72 @@
+"""A small ROS 2 peer for the multi-process tests (run as a separate process).
+
+    python ros_probe.py listen OUT.json SECONDS UNTIL TOPIC [...]  count messages (keep status texts) for at
+                                                                   most SECONDS, or until every topic has UNTIL
+    python ros_probe.py bad_commands SECONDS                       publish malformed stator commands
+"""
+import json
+import sys
+import time
+
+import rclpy
+from rclpy.node import Node
+
+from gyro_sim.messages import TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS
+from gyro_sim.ros.common import message_class, qos_profile
+
+
+def listen(out: str, seconds: float, until: int, topics: list) -> None:
+    node = Node("gyro_probe")
+    counts = {t: 0 for t in topics}
+    texts = []
+    stamps = []
+
+    def cb(topic):
+        def f(msg):
+            counts[topic] += 1
+            if topic == TOPIC_STATUS:
+                texts.append(msg.data)
+            elif hasattr(msg, "header"):
+                stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        return f
+
+    for t in topics:
+        node.create_subscription(message_class(TOPICS[t]), t, cb(t), qos_profile(t))
+    end = time.time() + seconds
+    while time.time() < end and not (until and all(n >= until for n in counts.values())):
+        rclpy.spin_once(node, timeout_sec=0.05)
+    with open(out, "w") as f:
+        json.dump({"counts": counts, "status": texts, "stamps": stamps}, f)
+    node.destroy_node()
+
+
+def bad_commands(seconds: float) -> None:
+    node = Node("gyro_bad_commander")
+    cls = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
+    pub = node.create_publisher(cls, TOPIC_STATOR_COMMANDS, qos_profile(TOPIC_STATOR_COMMANDS))
+    bad = [
+        (["z1"], [float("nan")], [0.0]),  # NaN current
+        (["z1"], [-1.0], [0.0]),  # negative current
+        (["z9"], [1.0], [0.0]),  # unknown stator
+        (["z1", "z2"], [1.0], []),  # one current for two names
+        (["z1"], [1.0], [float("inf")]),  # infinite rate
+    ]
+    end = time.time() + seconds
+    while time.time() < end:
+        for names, eff, vel in bad:
+            m = cls()
+            m.name, m.effort, m.velocity = names, eff, vel
+            pub.publish(m)
+        rclpy.spin_once(node, timeout_sec=0.2)
+    node.destroy_node()
+
+
+if __name__ == "__main__":
+    rclpy.init()
+    try:
+        if sys.argv[1] == "listen":
+            listen(sys.argv[2], float(sys.argv[3]), int(sys.argv[4]), sys.argv[5:])
+        else:
+            bad_commands(float(sys.argv[2]))
+    finally:
+        rclpy.shutdown()
