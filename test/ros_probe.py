@@ -32,6 +32,7 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
 
     for t in topics:
         node.create_subscription(message_class(TOPICS[t]), t, cb(t), qos_profile(t))
+    open(out + ".ready", "w").close()  # subscriptions exist: the test may start publishers
     end = time.time() + seconds
     while time.time() < end and not (until and all(n >= until for n in counts.values())):
         rclpy.spin_once(node, timeout_sec=0.05)

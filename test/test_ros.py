@@ -77,6 +77,15 @@ def finish(p, timeout=180):
     return p.returncode, out
 
 
+def wait_ready(out: Path, timeout: float = 120.0) -> None:
+    """Wait for a probe to have made its subscriptions (first imports may compile for a while)."""
+    t0 = time.time()
+    while not Path(str(out) + ".ready").exists():
+        assert time.time() - t0 < timeout, "the probe did not start"
+        time.sleep(0.1)
+    time.sleep(0.5)
+
+
 def done_figures(status: list) -> dict:
     """Figures of the simulator's final status line."""
     line = [s for s in status if s.startswith("done:")][-1]
@@ -130,7 +139,7 @@ def test_replay_republishes_a_bag(ros, tmp_path):
     record_result(gyro_sim_run, bag)
     out = tmp_path / "seen.json"
     probe = ros.start(PROBE, "listen", str(out), "60", "501", "/gyro/kinetic_moment", "/clock", "/gyro/imu")
-    time.sleep(1.5)
+    wait_ready(out)
     rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "2.0")
     code, text = finish(rep, 60)
     assert code == 0, text
@@ -186,7 +195,7 @@ def test_signal_during_recording_leaves_a_readable_bag(ros, tmp_path, sig):
 def test_malformed_commands_are_refused_with_reasons(ros, tmp_path):
     out = tmp_path / "status.json"
     probe = ros.start(PROBE, "listen", str(out), "12", "0", "/gyro/status")
-    time.sleep(1.0)
+    wait_ready(out)
     sim = ros.simulator(scene="nutation_oblate", mode="realtime", duration=4.0, watchdog_timeout=0.0)
     bad = ros.start(PROBE, "bad_commands", "3")
     code, text = finish(sim)

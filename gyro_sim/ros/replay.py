@@ -18,16 +18,23 @@ from ..messages import QOS, TOPICS
 from .common import message_class, qos_profile, stop_on_signals
 
 
-def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 5.0) -> None:
-    """Wait (≤ timeout) until every subscriber already in the graph is matched to our publishers.
+def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0) -> None:
+    """Wait until discovery has settled: every subscriber in the graph matched to our publishers and the
+    graph unchanged for ``settle`` s (≤ ``timeout``).
 
-    Messages published before a reliable subscriber is matched are lost, so the first samples of a
-    replay would be dropped without this.
+    Messages published before a reliable subscriber is matched are lost, so without this the first
+    samples of a replay would be dropped for subscribers that are already running.
     """
-    end = time.perf_counter() + timeout
-    time.sleep(0.2)
-    while time.perf_counter() < end and not stop.is_set():
-        if all(p.get_subscription_count() >= node.count_subscribers(p.topic_name) for p in pubs):
+    pubs = list(pubs)
+    start = time.perf_counter()
+    last, since = None, start
+    while time.perf_counter() - start < timeout and not stop.is_set():
+        seen = tuple(node.count_subscribers(p.topic_name) for p in pubs)
+        matched = all(p.get_subscription_count() >= n for p, n in zip(pubs, seen))
+        now = time.perf_counter()
+        if seen != last:
+            last, since = seen, now
+        elif matched and now - since >= settle:
             return
         time.sleep(0.05)
 
