@@ -35,8 +35,11 @@ def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 
         if seen != last:
             last, since = seen, now
         elif matched and now - since >= settle:
-            return
+            break
         time.sleep(0.05)
+    # our writers may know a reader before that reader knows them (its first samples would be dropped):
+    # give the other side of discovery time too, as `ros2 bag play --delay` does
+    stop.wait(settle)
 
 
 def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None) -> int:
