@@ -31,7 +31,9 @@ class PsiSwitchingParams(_Strict):
     law: Literal["psi_switching"] = "psi_switching"
     control_stators: list[str] = ["z1", "z2"]
     spin_stator: str = "z3"
-    nu: Finite  # rad/s; > 0 drives θ → 0, < 0 drives θ → π
+    # rad/s, one value or one per control stator; > 0 drives θ → 0, < 0 drives θ → π. Give the control
+    # stators different |ν|: at equal rates their cross terms do not average out (resonance)
+    nu: Union[Finite, list[Finite]]
     control_current: NonNegative
     spin_current: NonNegative
     spin_rate: Finite  # ν0, rad/s
@@ -41,26 +43,76 @@ class PsiSwitchingParams(_Strict):
     def _distinct(self) -> "PsiSwitchingParams":
         if self.spin_stator in self.control_stators:
             raise ValueError(f"spin_stator = {self.spin_stator!r} is also a control stator; they must differ")
+        if isinstance(self.nu, list):
+            if len(self.nu) != len(self.control_stators):
+                raise ValueError(f"nu = {self.nu}: one rate per control stator ({len(self.control_stators)}) or one value")
+            if len({math.copysign(1.0, v) for v in self.nu if v != 0}) > 1:
+                raise ValueError(f"nu = {self.nu}: the rates must share one sign (it chooses θ → 0 or θ → π)")
         return self
+
+    def rate(self, i: int) -> float:
+        """ν of control stator i (rad/s)."""
+        return self.nu[i] if isinstance(self.nu, list) else self.nu
+
+
+class OffParams(_Strict):
+    """Off: every stator current is 0 A (rates unchanged)."""
+
+    law: Literal["off"] = "off"
+
+
+class HoldParams(_Strict):
+    """Hold: keep whatever the stators were last commanded (no command is sent)."""
+
+    law: Literal["hold"] = "hold"
+
+
+class ManualCommand(_Strict):
+    current: NonNegative  # A
+    rate: Finite  # rad/s
+
+
+class ManualParams(_Strict):
+    """Manual: fixed commands per stator name, e.g. {z3: {current: 1.0, rate: 3000.0}}."""
+
+    law: Literal["manual"] = "manual"
+    commands: dict[str, ManualCommand]
+
+
+LAW_NAMES = ("spinup", "psi_switching", "off", "hold", "manual")
 
 
 class ControllerConfig(_Strict):
-    """``controller:`` section of a scene: the law, its period (s) and its parameters."""
+    """``controller:`` section of a scene: the law, its period (s), its parameters and limits.
 
-    law: Literal["spinup", "psi_switching"]
+    ``current_limit`` (A) and ``rate_limit`` (rad/s) clip every command of every law. ``sampling``:
+    ``period`` evaluates the law at each tick (as a controller node does over DDS); ``events`` also
+    locates the law's switching instants between ticks exactly (in-process runs only; laws
+    without switching functions are sampled).
+    """
+
+    law: Literal["spinup", "psi_switching", "off", "hold", "manual"]
     period: Optional[Positive] = None  # s; default: the output period of the scene
-    params: Union[SpinupParams, PsiSwitchingParams] = Field(discriminator="law")
+    sampling: Literal["period", "events"] = "period"
+    current_limit: Optional[NonNegative] = None  # A
+    rate_limit: Optional[NonNegative] = None  # rad/s
+    params: Union[SpinupParams, PsiSwitchingParams, OffParams, HoldParams, ManualParams] = Field(
+        discriminator="law")
 
     @model_validator(mode="before")
     @classmethod
     def _tag(cls, data):
-        if isinstance(data, dict) and isinstance(data.get("params"), dict) and "law" in data:
+        if isinstance(data, dict) and "law" in data and isinstance(data.get("params", {}), dict):
             data = dict(data)
-            data["params"] = {"law": data["law"], **data["params"]}
+            data["params"] = {"law": data["law"], **data.get("params", {})}
         return data
 
     def stators_used(self) -> list[str]:
         p = self.params
         if isinstance(p, SpinupParams):
             return [p.stator]
-        return [*p.control_stators, p.spin_stator]
+        if isinstance(p, PsiSwitchingParams):
+            return [*p.control_stators, p.spin_stator]
+        if isinstance(p, ManualParams):
+            return list(p.commands)
+        return []

@@ -13,7 +13,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .config import ControllerConfig, PsiSwitchingParams, SpinupParams
+from .config import ControllerConfig, HoldParams, ManualParams, OffParams, PsiSwitchingParams, SpinupParams
 
 Commands = dict  # {stator name: (current A, field rate rad/s)}
 
@@ -87,20 +87,73 @@ def psi_switching(x: ControlInput, p: PsiSwitchingParams) -> Commands:
     th = x.theta
     e = transverse_unit(x)
     if e is None or th < p.dead_band or math.pi - th < p.dead_band:
-        for name in p.control_stators:
-            out[name] = (0.0, p.nu)
+        for i, name in enumerate(p.control_stators):
+            out[name] = (0.0, p.rate(i))
         return out
-    for name in p.control_stators:
+    for i, name in enumerate(p.control_stators):
         s = float(x.axis(name) @ e)
-        out[name] = (p.control_current, p.nu if s >= 0.0 else -p.nu)  # [K] (3.1)
+        out[name] = (p.control_current, p.rate(i) if s >= 0.0 else -p.rate(i))  # [K] (3.1)
     return out
 
 
-LAWS: Mapping[str, Callable] = {"spinup": spinup, "psi_switching": psi_switching}
+def psi_switching_functions(x: ControlInput, p: PsiSwitchingParams) -> np.ndarray:
+    """Switching functions of [K] (3.1): u_n · e⊥ for the control stators (their sign sets ν_n).
+
+    Zero inside the dead band (no switching there). A simulator locating the zeros of these between
+    control ticks switches the fields at the exact instants.
+    """
+    th = x.theta
+    e = transverse_unit(x)
+    if e is None or th < p.dead_band or math.pi - th < p.dead_band:
+        return np.zeros(len(p.control_stators))
+    return np.array([float(x.axis(n) @ e) for n in p.control_stators])
+
+
+def off(x: ControlInput, p: OffParams) -> Commands:
+    """Every stator off (0 A), rates unchanged."""
+    return {n: (0.0, None) for n in x.stator_names}
+
+
+def hold(x: ControlInput, p: HoldParams) -> Commands:
+    """Keep the last commands (send nothing)."""
+    return {}
+
+
+def manual(x: ControlInput, p: ManualParams) -> Commands:
+    """The fixed commands of the parameters."""
+    return {n: (c.current, c.rate) for n, c in p.commands.items()}
+
+
+LAWS: Mapping[str, Callable] = {"spinup": spinup, "psi_switching": psi_switching, "off": off, "hold": hold,
+                                "manual": manual}
+SWITCHING: Mapping[str, Callable] = {"psi_switching": psi_switching_functions}
+
+
+def limited(commands: Commands, current_limit: float | None, rate_limit: float | None) -> Commands:
+    """Commands clipped to 0 ≤ current ≤ current_limit (A) and |rate| ≤ rate_limit (rad/s)."""
+    if current_limit is None and rate_limit is None:
+        return commands
+    out = {}
+    for n, (c, r) in commands.items():
+        if c is not None and current_limit is not None:
+            c = min(max(c, 0.0), current_limit)
+        if r is not None and rate_limit is not None:
+            r = min(max(r, -rate_limit), rate_limit)
+        out[n] = (c, r)
+    return out
 
 
 def make_law(cfg: ControllerConfig) -> Callable[[ControlInput], Commands]:
-    """The law of a controller config as a one-argument function of the state."""
+    """The law of a controller config (with its limits) as a one-argument function of the state."""
     fn = LAWS[cfg.law]
+    params, cl, rl = cfg.params, cfg.current_limit, cfg.rate_limit
+    return lambda x: limited(fn(x, params), cl, rl)
+
+
+def make_switching(cfg: ControllerConfig) -> Callable[[ControlInput], np.ndarray] | None:
+    """The law's switching functions (None for a law without switching)."""
+    fn = SWITCHING.get(cfg.law)
+    if fn is None:
+        return None
     params = cfg.params
     return lambda x: fn(x, params)

@@ -379,12 +379,15 @@ class Runner:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
 
-    def advance(self) -> slice:
-        """Integrate to the next break; returns the slice of the output rows written."""
+    def advance(self, until: Optional[float] = None) -> slice:
+        """Integrate to the next break (or to ``until`` if that comes first); returns the output rows written."""
         if self.row == 0:
             return self.record_initial()
         tb = self.breaks[self._bi]
-        self._bi += 1
+        if until is not None and until < tb:
+            tb = until
+        else:
+            self._bi += 1
         t_out, row = self.t_out, self.row
         sel = t_out[row:][t_out[row:] <= tb + 1e-12 * max(1.0, tb)]
         sim = self.sim
@@ -398,6 +401,50 @@ class Runner:
         self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
         self.apply_scene_commands()
         return rows
+
+    # --- exact switching instants ------------------------------------------------------------
+    def _snapshot(self) -> tuple:
+        sim = self.sim
+        return (sim.y.copy(), sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy(), sim._nu_max,
+                self.row, self._bi, self._ci, len(self.command_log))
+
+    def _restore(self, snap: tuple) -> None:
+        sim = self.sim
+        sim.y[:], sim.t, sim.phase[:], sim.current[:], sim.rate[:], sim._nu_max = snap[:6]
+        self.row, self._bi, self._ci = snap[6:9]
+        del self.command_log[snap[9]:]
+
+    def advance_located(self, law, switching) -> slice:
+        """:meth:`advance` to the next break, switching the law's commands at the exact zeros of its
+        switching functions in between (bisection to 1e-12 relative in time on re-integrated states).
+
+        ``switching(x)`` returns the law's switching functions; a sign change of a non-zero one is a
+        switch. Integration work of the search counts in ``steps``.
+        """
+        first = self.row
+        while True:
+            snap = self._snapshot()
+            s0 = switching(self.control_input())
+            t0 = self.sim.t
+            self.advance()
+            s1 = switching(self.control_input())
+            if not np.any((np.sign(s0) * np.sign(s1)) < 0):
+                return slice(first, self.row)
+            lo_t, hi_t, lo = t0, self.sim.t, snap
+            for _ in range(200):
+                if hi_t - lo_t <= 1e-12 * max(1.0, hi_t):
+                    break
+                mid = 0.5 * (lo_t + hi_t)
+                self._restore(lo)
+                self.sim.advance(mid)
+                s = switching(self.control_input())
+                if np.any((np.sign(s0) * np.sign(s)) < 0):
+                    hi_t = mid
+                else:
+                    lo_t, lo = mid, self._snapshot()
+            self._restore(snap)
+            self.advance(until=hi_t)  # records the samples before the switch
+            self.apply_commands(law(self.control_input()))
 
     def samples(self, rows: slice) -> dict:
         """Output rows as arrays: t, L, q, omega_b, euler, torque, energy, current, rate, phase."""
@@ -418,18 +465,21 @@ class Runner:
 def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunResult:
     """Run a scene in-process (no ROS) and return its time series at the scene's output rate.
 
-    A scene with a ``controller`` runs its law (gyro_ctl) at every tick. ``on_samples(dict)``, if
+    A scene with a ``controller`` runs its law (gyro_ctl) at every tick, and with ``sampling: events``
+    also at the exact zeros of the law's switching functions between ticks. ``on_samples(dict)``, if
     given, is called with each new chunk of output rows (see :meth:`Runner.samples`).
     """
-    from gyro_ctl.laws import make_law
+    from gyro_ctl.laws import make_law, make_switching
 
     r = Runner(scene, duration)
-    law = make_law(scene.controller) if scene.controller is not None else None
+    ctl = scene.controller
+    law = make_law(ctl) if ctl is not None else None
+    switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
     w0 = time.perf_counter()
     while not r.done:
         if r.row > 0 and law is not None and r.is_control_tick:
             r.apply_commands(law(r.control_input()))
-        rows = r.advance()
+        rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
         if on_samples is not None and rows.stop > rows.start:
             on_samples(r.samples(rows))
     r.wall_time = time.perf_counter() - w0

@@ -36,7 +36,8 @@ LAW_PARAMS = {
     "ramp": (0.0, "spinup: current ramp, A/s (0 = none)"),
     "control_stators": ([""], "psi_switching: control stator names"),
     "spin_stator": ("", "psi_switching: the spin stator"),
-    "nu": (float("nan"), "psi_switching: control field rate, rad/s (> 0: θ → 0, < 0: θ → π)"),
+    "nu": (float("nan"), "psi_switching: control field rate(s), rad/s: one value or one per control stator "
+                         "(> 0: θ → 0, < 0: θ → π)"),
     "control_current": (float("nan"), "psi_switching: control current, A"),
     "spin_current": (float("nan"), "psi_switching: spin stator current, A"),
     "spin_rate": (float("nan"), "psi_switching: spin stator field rate ν0, rad/s"),
@@ -53,9 +54,11 @@ class ControllerNode(Node):
         super().__init__("gyro_controller")
         self.declare_parameter("scene", "spinup_thin_shell", ParameterDescriptor(
             description="scene file path or built-in name (stator axes, default law and parameters)"))
-        self.declare_parameter("law", "", ParameterDescriptor(description="'' (the scene's), spinup, psi_switching"))
+        self.declare_parameter("law", "", ParameterDescriptor(
+            description="'' (the scene's), spinup, psi_switching, off, hold (manual: from the scene only)"))
         for name, (default, desc) in LAW_PARAMS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=desc))
+            self.declare_parameter(name, default, ParameterDescriptor(description=desc,
+                                                                      dynamic_typing=(name == "nu")))
         try:
             self.scene = load_scene(self.get_parameter("scene").value)
         except SceneError as e:
@@ -86,14 +89,19 @@ class ControllerNode(Node):
         law = value("law") or (base.law if base else "")
         if not law:
             return None, ("no control law: the scene has no controller section and parameter law is empty; "
-                          "allowed: spinup, psi_switching")
+                          "allowed: spinup, psi_switching, off, hold")
         params = base.params.model_dump(exclude={"law"}) if base is not None and base.law == law else {}
         for n in LAW_PARAMS:
             v = value(n)
             if not _unset(v) and n in _fields(law):
-                params[n] = None if (n == "ramp" and v == 0.0) else (list(v) if n == "control_stators" else v)
+                if n == "ramp" and v == 0.0:
+                    v = None
+                elif n in ("control_stators", "nu") and not isinstance(v, (str, float, int)):
+                    v = list(v)
+                params[n] = v
         try:
-            return ControllerConfig(law=law, params=params), ""
+            extra = {k: getattr(base, k) for k in ("current_limit", "rate_limit")} if base is not None else {}
+            return ControllerConfig(law=law, params=params, **extra), ""
         except ValidationError as e:
             errs = "; ".join(f"{'.'.join(str(x) for x in er['loc'][1:]) or 'params'}: {er['msg']}"
                              for er in e.errors())
@@ -127,8 +135,10 @@ class ControllerNode(Node):
                          q=np.array([o.w, o.x, o.y, o.z]), omega_b=np.array([w.x, w.y, w.z]),
                          stator_names=self.names, stator_axes=self.axes)
         cmds = self.law(x)
-        names = list(cmds)
-        fields = command_message(0.0, names, [float(cmds[n][0]) for n in names], [float(cmds[n][1]) for n in names])
+        names = list(cmds)  # empty (law 'hold'): an empty command, which changes nothing
+        rates = [cmds[n][1] for n in names]
+        fields = command_message(0.0, names, [float(cmds[n][0]) for n in names],
+                                 None if all(r is None for r in rates) else [float(r) for r in rates])
         out = to_ros(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), fields)
         out.header.stamp = imu.header.stamp
         self.pub.publish(out)
@@ -137,7 +147,8 @@ class ControllerNode(Node):
 def _fields(law: str) -> set:
     from ..config import PsiSwitchingParams, SpinupParams
 
-    return set((SpinupParams if law == "spinup" else PsiSwitchingParams).model_fields) - {"law"}
+    model = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}.get(law)
+    return set(model.model_fields) - {"law"} if model else set()
 
 
 def main(args=None) -> int:

@@ -38,13 +38,17 @@ def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     """Check a /gyro/stator_commands JointState; ((names, currents, rates|None, stamp_ns), '') or (None, reason).
 
     name: known stators, no repeats; effort (current, A): one finite value ≥ 0 per name;
-    velocity (field rate, rad/s): empty (rates unchanged) or one finite value per name.
+    velocity (field rate, rad/s): empty (rates unchanged) or one finite value per name. A message with
+    no names and no values is a valid empty command (nothing changes).
     """
     names = list(msg.name)
     cur = list(msg.effort)
     rate = list(msg.velocity)
+    stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
     if not names:
-        return None, "name is empty; expected stator names from " + str(stators)
+        if cur or rate:
+            return None, f"name is empty but effort/velocity are not; expected stator names from {stators}"
+        return ([], [], None, stamp), ""  # an empty command: nothing changes (law 'hold')
     unknown = [n for n in names if n not in stators]
     if unknown:
         return None, f"name = {names}: unknown stator {unknown[0]!r}; allowed: {stators}"
@@ -60,7 +64,7 @@ def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     for n, r in zip(names, rate):
         if not math.isfinite(r):
             return None, f"velocity[{n}] = {r}: field rate must be finite (rad/s)"
-    return (names, cur, rate or None, msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec), ""
+    return (names, cur, rate or None, stamp), ""
 
 
 def stop_on_signals(stop: threading.Event) -> Callable[[], None]:

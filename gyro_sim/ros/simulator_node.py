@@ -192,7 +192,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     def apply(cmd):
         nm, cur, rate, stamp = cmd
         runner.apply_commands({n: (cur[i], rate[i] if rate is not None else None) for i, n in enumerate(nm)})
-        if recorder is not None:
+        if recorder is not None and nm:
             recorder.write_command(runner.sim.t, nm, cur, rate)
 
     try:
