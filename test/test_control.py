@@ -116,3 +116,14 @@ def test_bad_controller_section_is_refused():
         gyro_sim.load_scene("nutation_oblate", overrides={"controller.params.nu": [1.0, 2.0, 3.0]})
     with pytest.raises(gyro_sim.SceneError, match=r"share one sign"):
         gyro_sim.load_scene("nutation_oblate", overrides={"controller.params.nu": [1.0, -2.0]})
+
+
+def test_lowest_control_rate_for_psi_switching():
+    """Sampled ψ-switching (as over ROS in lockstep, which gives the same numbers) needs ≈ 4 ticks per
+    precession period: at 8 ms (3.9 ticks) θ still settles below 0.1°, at 15.5 ms (2 ticks) it does not."""
+    out = {}
+    for per in (0.008, 0.0155):
+        r = gyro_sim.run(nutation(**{"controller.period": per, "duration": 2.0, "output.rate": 500.0}))
+        out[per] = math.degrees(r.theta[-1])
+        print(f"  period {per * 1e3:g} ms = {PREC / per:.1f} ticks per precession period: θ(2 s) = {out[per]:.3f}°")
+    assert out[0.008] < 0.1 and out[0.0155] > 1.0
