@@ -6,6 +6,8 @@ from typing import Annotated, Literal, Optional, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from .reorient import ReorientParams
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -79,7 +81,7 @@ class ManualParams(_Strict):
     commands: dict[str, ManualCommand]
 
 
-LAW_NAMES = ("spinup", "psi_switching", "off", "hold", "manual")
+LAW_NAMES = ("spinup", "psi_switching", "off", "hold", "manual", "reorient")
 
 
 class ControllerConfig(_Strict):
@@ -91,12 +93,12 @@ class ControllerConfig(_Strict):
     without switching functions are sampled).
     """
 
-    law: Literal["spinup", "psi_switching", "off", "hold", "manual"]
+    law: Literal["spinup", "psi_switching", "off", "hold", "manual", "reorient"]
     period: Optional[Positive] = None  # s; default: the output period of the scene
     sampling: Literal["period", "events"] = "period"
     current_limit: Optional[NonNegative] = None  # A
     rate_limit: Optional[NonNegative] = None  # rad/s
-    params: Union[SpinupParams, PsiSwitchingParams, OffParams, HoldParams, ManualParams] = Field(
+    params: Union[SpinupParams, PsiSwitchingParams, OffParams, HoldParams, ManualParams, ReorientParams] = Field(
         discriminator="law")
 
     @model_validator(mode="before")
@@ -115,4 +117,6 @@ class ControllerConfig(_Strict):
             return [*p.control_stators, p.spin_stator]
         if isinstance(p, ManualParams):
             return list(p.commands)
+        if isinstance(p, ReorientParams):
+            return p.stators_used()
         return []

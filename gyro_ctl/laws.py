@@ -13,6 +13,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from .reorient import reorient
 from .config import ControllerConfig, HoldParams, ManualParams, OffParams, PsiSwitchingParams, SpinupParams
 
 Commands = dict  # {stator name: (current A, field rate rad/s)}
@@ -125,7 +126,7 @@ def manual(x: ControlInput, p: ManualParams) -> Commands:
 
 
 LAWS: Mapping[str, Callable] = {"spinup": spinup, "psi_switching": psi_switching, "off": off, "hold": hold,
-                                "manual": manual}
+                                "manual": manual, "reorient": reorient}
 SWITCHING: Mapping[str, Callable] = {"psi_switching": psi_switching_functions}
 
 

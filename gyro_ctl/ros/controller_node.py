@@ -147,7 +147,7 @@ class ControllerNode(Node):
 def _fields(law: str) -> set:
     from ..config import PsiSwitchingParams, SpinupParams
 
-    model = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}.get(law)
+    model = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}.get(law)  # others: from the scene only
     return set(model.model_fields) - {"law"} if model else set()
 
 
