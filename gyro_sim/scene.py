@@ -45,6 +45,8 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       period: 0.001                  # s (default: the output period)
       params: {nu: 300.0, control_current: 1.0, spin_current: 1.0, spin_rate: 3000.0}
 
+    fidelity: full                   # full | averaged | auto (gyro_sim/fidelity.py)
+
 Fields are switched on at t = 0 on a rotor free of eddy currents.
 
 The stator triad: e1k is the next case axis after u_k in cyclic order (z1→z2→z3→z1),
@@ -196,7 +198,7 @@ class Scene(_Strict):
     output: Output = Output()
     integrator: Integrator = Integrator()
     controller: Optional[ControllerConfig] = None
-    fidelity: Literal["full"] = "full"
+    fidelity: Literal["full", "averaged", "auto"] = "full"
     source: Optional[str] = None
 
     @model_validator(mode="after")

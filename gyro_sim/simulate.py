@@ -54,6 +54,8 @@ class RunResult:
     wall_time: float = 0.0
     steps: int = 0
     commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
+    averaged_segments: list = field(default_factory=list)  # (t0, t1) s run with the averaged model
+    averaged_rhs_evaluations: int = 0
 
     @property
     def spin_rate(self) -> np.ndarray:
@@ -471,6 +473,10 @@ def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunR
     """
     from gyro_ctl.laws import make_law, make_switching
 
+    if scene.fidelity != "full":
+        from .fidelity import run_hybrid
+
+        return run_hybrid(scene, duration)
     r = Runner(scene, duration)
     ctl = scene.controller
     law = make_law(ctl) if ctl is not None else None
