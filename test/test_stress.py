@@ -1,0 +1,144 @@
+"""Numerical stress tests: extreme angles, spins, μ, skin depths, near-resonant stators, random scenes.
+
+Fast versions run by default; ``pytest --stress`` runs the long ones too (marker ``slow``).
+"""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import gyro_sim
+from gyro_sim.conductor import conductor_model, g_solid_sphere
+from gyro_sim.scene import SceneError, scene_from_dict
+
+SHELL = {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}
+J = [5.592e-6, 5.592e-6, 5.704e-6]
+
+
+def scene(**kw):
+    d = {"rotor": {"inertia": J, "conductor": SHELL}, "duration": 0.1}
+    d.update(kw)
+    return scene_from_dict(d)
+
+
+def finite(r):
+    return all(np.all(np.isfinite(a)) for a in (r.L, r.q, r.omega_b, r.torque, r.energy, r.euler[:, 1]))
+
+
+@pytest.mark.parametrize("theta", [1e-9, math.pi - 1e-9])
+@pytest.mark.parametrize("fields", [False, True])
+def test_theta_at_the_singular_values(theta, fields):
+    """θ0 = 1e-9 and π − 1e-9: the quaternion state has no singularity; outputs stay finite and θ is kept."""
+    kw = {"initial": {"spin": 500.0, "theta": theta}, "torque_model": "lag" if fields else "none",
+          "stators": [{"name": "z3", "axis": [0, 0, 1], "coil_constant": 1e-3, "current": 1.0, "rate": 600.0}]
+          if fields else []}
+    if not fields:
+        kw["rotor"] = {"inertia": J}
+    r = gyro_sim.run(scene(**kw))
+    dth = float(np.max(np.abs(r.theta - theta)))
+    print(f"\nθ0 = {theta!r}, fields {fields}: max |θ − θ0| = {dth:.1e} rad over {r.steps} steps")
+    assert finite(r) and dth < 1e-6
+
+
+@pytest.mark.parametrize("spin", [1e3, 1e4, 1e5])
+def test_high_spin_free_rotor_conserves(spin):
+    """Triaxial free rotor up to 1e5 rad/s: |L| and energy at round-off."""
+    r = gyro_sim.run(scene_from_dict({"rotor": {"inertia": [5.0e-6, 5.5e-6, 6.0e-6]}, "torque_model": "none",
+                                      "initial": {"spin": spin, "theta": 0.4, "phi": 0.3},
+                                      "duration": 2000 * 2 * math.pi / spin, "output": {"rate": 50 * spin / 2000}}))
+    dE = float(np.max(np.abs(r.energy / r.energy[0] - 1)))
+    dL = float(np.max(np.abs(np.linalg.norm(r.L, axis=1) / np.linalg.norm(r.L[0]) - 1)))
+    print(f"\nspin {spin:g} rad/s, 2000 revolutions: |L| drift {dL:.1e}, energy drift {dE:.1e}")
+    assert dL < 1e-14 and dE < 1e-12
+
+
+def test_high_spin_with_field_stays_finite_and_brakes():
+    """1e5 rad/s in a constant field: the transverse spin decays, L·B stays put, nothing overflows."""
+    r = gyro_sim.run(scene(initial={"spin": 1e5, "L_direction": [0.6, 0, 0.8]}, duration=0.05,
+                           field=[{"real": [0, 0, 0.01], "imag": [0, 0, 0], "frequency": 0.0}], output={"rate": 200.0}))
+    dz = abs(r.L[-1, 2] / r.L[0, 2] - 1)
+    print(f"\n1e5 rad/s, {r.steps} steps: L_z drift {dz:.1e}; |L_⊥| {np.hypot(*r.L[0, :2]):.4e} → {np.hypot(*r.L[-1, :2]):.4e}")
+    assert finite(r) and dz < 1e-9 and np.hypot(*r.L[-1, :2]) < np.hypot(*r.L[0, :2])
+
+
+@pytest.mark.parametrize("mu", [1e-6, 1e-4, 1e-2, 1e-1])
+def test_mu_range_spinup(mu):
+    """Spin-up with μ = k_e B² ν/(J ν²) from 1e-6 to 1e-1: finite, monotone approach to the field rate."""
+    k_e = conductor_model("thin_shell", 0.025, 2.5e7, thickness=0.001).k_e
+    nu = 500.0
+    B = math.sqrt(mu * J[2] * nu / k_e)  # μ = k_e B²/(J3 ν)
+    T = min(5.0, 3 * J[2] / (k_e * B**2))
+    r = gyro_sim.run(scene(torque_model="quasi_static", duration=T, output={"rate": 200.0},
+                           stators=[{"name": "z3", "axis": [0, 0, 1], "coil_constant": B, "current": 1.0, "rate": nu}]))
+    print(f"\nμ = {mu:g}: B0 = {B:.3g} T, spin {r.spin_rate[0]:.1f} → {r.spin_rate[-1]:.2f} rad/s in {T:.3g} s")
+    assert finite(r) and np.all(np.diff(r.spin_rate) >= -1e-9 * nu) and r.spin_rate[-1] <= nu * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("x", [1e2, 1e3])
+def test_solid_sphere_deep_skin_effect(x):
+    """ω μ0 σ a² up to 1e3 with 50 modes: the steady torque matches (2.14) (stiff modes, ETD steps)."""
+    a, sigma = 0.025, 2.5e7
+    w = x / (4e-7 * math.pi * sigma * a * a)
+    m = conductor_model("solid_sphere", a, sigma, n_modes=50)
+    tau1 = float(m.tau[0])
+    r = gyro_sim.run(scene(rotor={"inertia": [1e3] * 3, "conductor": {"kind": "solid_sphere", "outer_radius": a,
+                                                                      "conductivity": sigma}}, modes=50,
+                           stators=[{"name": "z3", "axis": [0, 0, 1], "coil_constant": 1e-3, "current": 1.0, "rate": w}],
+                           duration=20 * tau1, output={"rate": 1 / tau1}))
+    expect = m.moment_scale * 1e-6 * float(np.imag(g_solid_sphere(w, a, sigma)))
+    err = abs(r.torque[-1, 2] / expect - 1)
+    print(f"\nω μ0 σ a² = {x:g}: torque error vs (2.14) {err:.1e} ({r.steps} steps, τ_50 = {m.tau[-1]:.1e} s)")
+    assert finite(r) and err < 1e-4
+
+
+def test_near_resonant_stators():
+    """Two stators 0.1 % apart in rate: the cross terms beat slowly; the run stays finite and the averaged
+    torque of the pair wanders around the non-resonant value instead of diverging."""
+    r = gyro_sim.run(scene(torque_model="quasi_static", duration=2.0, output={"rate": 500.0},
+                           initial={"spin": 100.0},
+                           stators=[{"name": "a", "axis": [1, 0, 0], "coil_constant": 0.01, "current": 1.0, "rate": 1000.0},
+                                    {"name": "b", "axis": [0, 1, 0], "coil_constant": 0.01, "current": 1.0, "rate": 1001.0}]))
+    print(f"\nnear-resonant pair: {r.steps} steps; |L| {np.linalg.norm(r.L[0]):.3e} → {np.linalg.norm(r.L[-1]):.3e}")
+    assert finite(r)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(J1=st.floats(1e-7, 1e-3), r2=st.floats(0.1, 3.0), r3=st.floats(0.1, 3.0),
+       spin=st.floats(-1e4, 1e4), theta=st.floats(0, math.pi), sigma=st.floats(-1e8, 1e8),
+       B=st.floats(0, 0.05), nu=st.floats(-1e4, 1e4), model=st.sampled_from(["none", "quasi_static", "lag"]))
+def test_random_scenes_run_or_are_refused(J1, r2, r3, spin, theta, sigma, B, nu, model):
+    """A random scene either is refused at load with a message naming a key, or runs with no NaN,
+    conserving |L| and energy where no torque acts."""
+    d = {"rotor": {"inertia": [J1, J1 * r2, J1 * r3],
+                   "conductor": {"kind": "thin_shell", "outer_radius": 0.02, "thickness": 0.001, "conductivity": sigma}},
+         "torque_model": model, "initial": {"spin": spin, "theta": theta, "phi": 0.3}, "duration": 0.02,
+         "stators": [{"name": "z3", "axis": [0, 0, 1], "coil_constant": max(B, 1e-9), "current": 1.0, "rate": nu}],
+         "output": {"rate": 500.0}}
+    try:
+        s = scene_from_dict(d)
+    except SceneError as e:
+        msg = str(e)
+        assert "invalid scene" in msg and any(k in msg for k in ("rotor.inertia", "conductivity")), msg
+        return
+    r = gyro_sim.run(s)
+    assert finite(r)
+    if model == "none":
+        assert np.max(np.abs(r.energy - r.energy[0])) <= 1e-11 * max(r.energy[0], 1e-300)
+
+
+@pytest.mark.slow
+def test_twenty_minute_spinup_full_against_auto():
+    """Long version: the 20-minute default spin-up (≈6·10⁵ revolutions), full model vs the hybrid."""
+    import time
+
+    s = gyro_sim.load_scene("spinup_thin_shell", overrides={"duration": 1200.0})
+    w = time.perf_counter()
+    full = gyro_sim.run(s)
+    w_full = time.perf_counter() - w
+    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    e = max(abs(hy.spin_rate[-1] / full.spin_rate[-1] - 1), abs(hy.theta[-1] / full.theta[-1] - 1))
+    print(f"\n20-minute spin-up: full {w_full:.1f} s wall, {full.steps} steps; auto {hy.wall_time:.2f} s; "
+          f"largest relative difference (spin, θ) {e:.1e}")
+    assert e < 1e-3
