@@ -244,7 +244,7 @@ class Simulator:
                 stops = np.append(stops, t_end)
                 record = np.append(record, False)
         Bre, Bim, om = self.phasors()
-        free = om.size == 0
+        free = om.size == 0 or self.c_m == 0.0  # no field, or no torque model: the geometric free stepper
         h_max = self._max_step(free)
         if not math.isfinite(h_max):
             h_max = max(t_end - self.t, 1e-300)
