@@ -174,6 +174,9 @@ def _phi123(z):
             p3 += term / ((j + 1) * (j + 2) * (j + 3))
             term *= z / (j + 1)
         return p1, p2, p3
+    if z < -1e3:  # e^z underflows: the exact asymptotic forms, without z² or z³ overflowing
+        iz = 1.0 / z
+        return -iz, -iz - iz * iz, -0.5 * iz - iz * iz - iz * iz * iz
     ez = math.exp(z)
     p1 = (ez - 1.0) / z
     p2 = (ez - 1.0 - z) / (z * z)

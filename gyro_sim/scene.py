@@ -85,9 +85,9 @@ class Conductor(_Strict):
     """Homogeneous non-magnetic spherical conductor of the rotor."""
 
     kind: Literal["thin_shell", "solid_sphere", "shell"]
-    outer_radius: Positive
-    conductivity: Positive
-    thickness: Optional[Positive] = None
+    outer_radius: Annotated[float, Field(ge=1e-6, le=10.0, allow_inf_nan=False)]  # m
+    conductivity: Annotated[float, Field(ge=1e-3, le=1e12, allow_inf_nan=False)]  # S/m (metals: 1e6–1e8)
+    thickness: Optional[Annotated[float, Field(ge=1e-9, allow_inf_nan=False)]] = None  # m
 
     @model_validator(mode="after")
     def _thickness(self) -> "Conductor":
@@ -110,7 +110,8 @@ class Conductor(_Strict):
 
 
 class Rotor(_Strict):
-    inertia: Annotated[list[Positive], Field(min_length=3, max_length=3)]
+    inertia: Annotated[list[Annotated[float, Field(ge=1e-15, le=1e6, allow_inf_nan=False)]],
+                       Field(min_length=3, max_length=3)]  # kg·m²
     conductor: Optional[Conductor] = None
 
     @field_validator("inertia")

@@ -58,7 +58,8 @@ def test_wrong_type():
 
 
 def test_negative_conductivity():
-    refuse(mutate("rotor.conductor.conductivity", -1.0), "rotor.conductor.conductivity", "-1.0", "greater than 0")
+    refuse(mutate("rotor.conductor.conductivity", -1.0), "rotor.conductor.conductivity", "-1.0",
+           "greater than or equal to 0.001")
 
 
 def test_triangle_inequality():
