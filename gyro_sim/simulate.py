@@ -424,7 +424,7 @@ class Runner:
         switch. Integration work of the search counts in ``steps``.
         """
         first = self.row
-        while True:
+        for _ in range(10_000):  # a sliding mode would switch without end: then the tick's sampling takes over
             snap = self._snapshot()
             s0 = switching(self.control_input())
             t0 = self.sim.t
@@ -446,7 +446,16 @@ class Runner:
                     lo_t, lo = mid, self._snapshot()
             self._restore(snap)
             self.advance(until=hi_t)  # records the samples before the switch
+            # the re-integrated path may end a hair before the zero: step on until the sign has turned,
+            # so the same switch is never found twice
+            dt = 1e-12 * max(1.0, hi_t)
+            while (not np.any(np.sign(s0) * np.sign(switching(self.control_input())) < 0)
+                   and self.sim.t + dt < self.breaks[self._bi]):
+                self.advance(until=self.sim.t + dt)
+                dt *= 2.0
             self.apply_commands(law(self.control_input()))
+        self.advance()  # to the break, sampled
+        return slice(first, self.row)
 
     def samples(self, rows: slice) -> dict:
         """Output rows as arrays: t, L, q, omega_b, euler, torque, energy, current, rate, phase."""
