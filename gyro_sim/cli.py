@@ -5,6 +5,8 @@
     gyro-sim info BAG               topics, counts, duration, scene of a recorded run
     gyro-sim plot BAG [--out PNG]   spin rate, θ, L and stator currents of a recorded run
     gyro-sim replay BAG [--rate F]  publish a bag over ROS 2 with its timing; --check re-simulates it
+    gyro-sim phase SCENE|BAG        (θ, φ) phase portrait over the averaged ψ-switching model
+    gyro-sim bench [--quick]        work-precision benchmark (table + PNG)
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
@@ -84,6 +86,19 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("--rate", metavar="F", type=float, default=1.0, help="playback speed factor (default 1)")
     replay.add_argument("--check", action="store_true", help="re-simulate instead of publishing")
     replay.set_defaults(func=_cmd_replay)
+
+    phase = sub.add_parser("phase", help="phase portrait (θ, φ) of a run over the analytic curves of [K] §3",
+                           description="Run SCENE in-process (or read BAG) and draw its (θ, φ) phase portrait over "
+                                       "the averaged ψ-switching model: ellipsoid (3.5), equilibria, limit cycles.")
+    phase.add_argument("source", metavar="SCENE|BAG", help="a scene (name or YAML) or a recorded bag directory")
+    phase.add_argument("--duration", metavar="S", type=_positive_seconds, default=None)
+    phase.add_argument("--out", metavar="PNG", type=Path, default=None, help="default: runs/<scene>_phase.png")
+    phase.set_defaults(func=_cmd_phase)
+
+    bench = sub.add_parser("bench", help="work-precision benchmark", add_help=False,
+                           description="Run the benchmark (see docs/benchmark.md); options after 'bench' go to it.")
+    bench.add_argument("rest", nargs=argparse.REMAINDER)
+    bench.set_defaults(func=_cmd_bench)
 
     scenes = sub.add_parser(
         "scenes",
@@ -327,6 +342,37 @@ def _cmd_replay(args) -> int:
 
     return subprocess.call([sys.executable, "-m", "gyro_sim.ros.replay", str(args.bag), repr(float(args.rate))],
                            env=ros_env())
+
+
+def _cmd_phase(args) -> int:
+    from gyro_sim import scene as scene_mod
+    from gyro_sim.phase import plot_phase
+
+    src = Path(args.source)
+    try:
+        if src.is_dir():
+            import yaml
+
+            res, _, b, _ = _bag_result(src)
+            scene = scene_mod.scene_from_dict(yaml.safe_load(b.scene_text), where=f"{src} (embedded scene)")
+        else:
+            from gyro_sim import simulate
+
+            scene = scene_mod.load_scene(args.source)
+            res = simulate.run(scene, duration=args.duration)
+    except scene_mod.SceneError as exc:
+        return _error(str(exc))
+    png = args.out or Path("runs") / f"{scene.name}_phase.png"
+    plot_phase(res, png, scene)
+    _write(sys.stdout, f"phase portrait: {png}\n")
+    return EXIT_OK
+
+
+def _cmd_bench(args) -> int:
+    from gyro_sim.bench import bench_main
+
+    rest = [a for a in args.rest if a != "--"]
+    return bench_main(rest)
 
 
 def _cmd_scenes(args) -> int:
