@@ -68,6 +68,13 @@ setup(
             'mpmath>=1.3',  # 50-digit reference values of [M] (2.13) in test_conductor
             'mcap-ros2-support>=0.5',  # independent reader of recorded bags in test_recording
         ],
+        # `gyro-sim sweep` (gyro_sim/sweep.py): runs on a Dask cluster (local or by scheduler
+        # address), results as Parquet, progress bar. The core imports none of these.
+        'sweep': [
+            'dask[distributed]>=2024.8',
+            'pyarrow>=15',
+            'tqdm>=4.66',
+        ],
     },
     # numba's on-disk cache (cache=True) writes next to the modules: never zipped.
     zip_safe=False,

@@ -16,10 +16,10 @@ Field: B(t) = Σ_p [Bre_p cos(ω_p s) + Bim_p sin(ω_p s)], s = t − t_seg (cas
 
 Steppers:
 
-* :func:`integrate_etd` — exponential RK4 (Cox & Matthews 2002, ETDRK4) on the whole state:
-  the stiff linear parts −e_n/τ_n are integrated exactly (φ-functions), so short τ_n never
-  force short steps; the other components see classical RK4. The quaternion is normalised
-  after each step.
+* :func:`integrate_etd` — exponential RK4 (Cox & Matthews 2002, ETDRK4) for L and the eddy
+  modes: the stiff linear parts −e_n/τ_n are integrated exactly (φ-functions), so short τ_n
+  never force short steps; the attitude takes the same RK4 stages on the rotation group
+  (RKMK4, :func:`etd_lie_step`), exact for a constant body rate.
 * :func:`integrate_free` — the torque-free rotor, geometric: H = |L|²/(2J_ref) + H_r; the first
   flow is an exact rotation about the fixed L, the second an exact rotation about the body axis
   of symmetry (axisymmetric body: the step is exact) or, for a triaxial body, the Lie–Poisson
@@ -197,32 +197,6 @@ def etd_coefficients(lam, h, E, E2, Q, A1, A2, A3):
         A1[i] = h * (p1 - 3.0 * p2 + 4.0 * p3)
         A2[i] = h * 2.0 * (p2 - 2.0 * p3)
         A3[i] = h * (-p2 + 4.0 * p3)
-
-
-@njit(cache=True)
-def etd_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work):
-    """One ETDRK4 step of length h from segment time s (in place on y)."""
-    n = y.shape[0]
-    Nu = buf[0]
-    Na = buf[1]
-    Nb = buf[2]
-    Nc = buf[3]
-    a = buf[4]
-    b = buf[5]
-    cc = buf[6]
-    nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work)
-    for i in range(n):
-        a[i] = E2[i] * y[i] + Q[i] * Nu[i]
-    nonlinear_part(s + 0.5 * h, a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work)
-    for i in range(n):
-        b[i] = E2[i] * y[i] + Q[i] * Na[i]
-    nonlinear_part(s + 0.5 * h, b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work)
-    for i in range(n):
-        cc[i] = E2[i] * a[i] + Q[i] * (2.0 * Nb[i] - Nu[i])
-    nonlinear_part(s + h, cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work)
-    for i in range(n):
-        y[i] = E[i] * y[i] + A1[i] * Nu[i] + A2[i] * (Na[i] + Nb[i]) + A3[i] * Nc[i]
-    _normalize_q(y)
 
 
 @njit(cache=True, inline="always")
