@@ -7,6 +7,7 @@
     gyro-sim replay BAG [--rate F]  publish a bag over ROS 2 with its timing; --check re-simulates it
     gyro-sim phase SCENE|BAG        (θ, φ) phase portrait over the averaged ψ-switching model
     gyro-sim bench [--quick]        work-precision benchmark (table + PNG)
+    gyro-sim sweep SCENE|SWEEP ...  parameter sweeps and Monte Carlo on Dask
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
@@ -99,6 +100,11 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Run the benchmark (see docs/benchmark.md); options after 'bench' go to it.")
     bench.add_argument("rest", nargs=argparse.REMAINDER)
     bench.set_defaults(func=_cmd_bench)
+
+    sweep = sub.add_parser("sweep", help="parameter sweeps and Monte Carlo (Dask)", add_help=False,
+                           description="Run the sweep tool (see docs/sweeps.md); options after 'sweep' go to it.")
+    sweep.add_argument("rest", nargs=argparse.REMAINDER)
+    sweep.set_defaults(func=_cmd_sweep)
 
     scenes = sub.add_parser(
         "scenes",
@@ -373,6 +379,12 @@ def _cmd_bench(args) -> int:
 
     rest = [a for a in args.rest if a != "--"]
     return bench_main(rest)
+
+
+def _cmd_sweep(args) -> int:
+    from gyro_sim.sweep import sweep_main
+
+    return sweep_main([a for a in args.rest if a != "--"])
 
 
 def _cmd_scenes(args) -> int:
