@@ -280,6 +280,15 @@ def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2
     _normalize_q(y)
 
 
+@njit(cache=True, inline="always")
+def _equal_steps(span, h_max):
+    """(k, h): the fewest equal steps h = span/k with h ≤ h_max (k ≥ 1)."""
+    k = int(math.ceil(span / h_max * (1.0 - 1e-12)))
+    if k < 1:
+        k = 1
+    return k, span / k
+
+
 @njit(cache=True)
 def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
                   out_y, out_N, k_out):
@@ -306,10 +315,7 @@ def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m,
     for i in range(t_stops.shape[0]):
         span = t_stops[i] - t
         if span > 0.0:
-            k = int(math.ceil(span / h_max * (1.0 - 1e-12)))
-            if k < 1:
-                k = 1
-            h = span / k
+            k, h = _equal_steps(span, h_max)
             if h != h_last:
                 etd_coefficients(lam, h, E, E2, Q, A1, A2, A3)
                 h_last = h
@@ -421,10 +427,7 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
     for i in range(t_stops.shape[0]):
         span = t_stops[i] - t
         if span > 0.0:
-            k = int(math.ceil(span / h_max * (1.0 - 1e-12)))
-            if k < 1:
-                k = 1
-            h = span / k
+            k, h = _equal_steps(span, h_max)
             for _ in range(k):
                 free_step(y, h, Jinv, inv_ref, axis, tau)
             steps += k
