@@ -31,10 +31,9 @@ from typing import Optional
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .constants import MU0
 from .frames import attitude_from_euler
 from .scene import Scene, SceneError
-from .simulate import RunResult, Runner, run as run_full
+from .simulate import RunResult, Runner
 
 THETA_MAX = 0.1  # rad
 RHO_MAX = 1e-3  # rad

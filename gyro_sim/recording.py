@@ -344,7 +344,8 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
     text = scene_text(scene)
     names = list(result.stator_names)
     n = len(result.t)
-    ns = [stamp_ns(t) for t in result.t.tolist()]  # validates every stamp before writing
+    for t in result.t.tolist():  # validate every stamp before anything is written
+        stamp_ns(t)
     t_end = float(result.t[-1]) if n else 0.0
     # every command the run applied (scene schedule and controller), at the time it applied it
     groups = [(float(t), list(nm), _command_values(cur), _command_values(rate))

@@ -13,15 +13,13 @@ import threading
 
 import numpy as np
 import rclpy
-from rclpy.exceptions import ParameterException
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from pydantic import ValidationError
 
 from gyro_sim.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, command_message,
                                to_ros)
-from gyro_sim.ros.common import message_class, msg_time, qos_profile, stop_on_signals
+from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
 from gyro_sim.scene import SceneError, load_scene
 from gyro_sim.simulate import stator_triad
 
@@ -151,27 +149,15 @@ def _fields(law: str) -> set:
     return set(model.model_fields) - {"law"} if model else set()
 
 
+def _spin(node: ControllerNode, stop: threading.Event) -> int:
+    while not stop.is_set() and rclpy.ok():
+        rclpy.spin_once(node, timeout_sec=0.1)
+    return 0
+
+
 def main(args=None) -> int:
     """Entry point (`ros2 run gyro_ctl controller`, console script `gyro-ctl-controller`)."""
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = threading.Event()
-    restore = stop_on_signals(stop)
-    node = None
-    try:
-        try:
-            node = ControllerNode()
-        except (SceneError, ParameterException) as e:
-            print(f"controller: error: {e}", file=sys.stderr)
-            return 2
-        while not stop.is_set() and rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.1)
-        return 0
-    finally:
-        restore()
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    return node_main("controller", ControllerNode, _spin, args)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import importlib
 import math
-import os
 import signal
 import threading
 from typing import Callable, Optional
@@ -67,6 +66,36 @@ def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     return (names, cur, rate or None, stamp), ""
 
 
+def node_main(who: str, build: Callable, loop: Callable, args=None) -> int:
+    """Run a node process: rclpy without its signal handlers (SIGINT/SIGTERM set ``stop`` instead),
+    ``build()`` the node (a SceneError or a refused parameter ends it with one ``who: error:`` line,
+    status 2), then ``loop(node, stop)``; always cleans up."""
+    import sys
+
+    import rclpy
+    from rclpy.exceptions import ParameterException
+
+    from ..scene import SceneError
+
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    stop = threading.Event()
+    restore = stop_on_signals(stop)
+    node = None
+    try:
+        try:
+            node = build()
+        except (SceneError, ParameterException) as e:
+            print(f"{who}: error: {e}", file=sys.stderr)
+            return 2
+        return loop(node, stop)
+    finally:
+        restore()
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
 def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
     """SIGINT/SIGTERM set ``stop`` (the loop ends cleanly and closes its bag). Returns a restore function."""
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -84,5 +113,5 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
     return restore
 
 
-__all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "stop_on_signals",
+__all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "stop_on_signals", "node_main",
            "stamp_ns"]

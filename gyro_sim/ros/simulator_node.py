@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 import queue
-import signal
 import sys
 import threading
 import time
@@ -25,19 +24,16 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
-import rclpy
-from rclpy.exceptions import ParameterException
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
 
 from ..messages import (TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS,
                         TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, stamp_ns, state_messages,
                         status_message, to_ros)
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
-from .common import message_class, parse_command, qos_profile, stop_on_signals
+from .common import message_class, node_main, parse_command, qos_profile
 
 MODES = ("lockstep", "realtime", "freerun")
 STATE_TOPICS = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_CLOCK)
@@ -250,33 +246,22 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     return 0
 
 
-def main(args=None) -> int:
-    """Entry point (`ros2 run gyro_sim simulator`, console script `gyro-sim-simulator`)."""
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = threading.Event()
-    restore = stop_on_signals(stop)
-    node = None
-    executor = None
+def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
+    """DDS callbacks in an executor thread, the simulation loop in this one."""
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spin = threading.Thread(target=executor.spin, daemon=True)
+    spin.start()
     try:
-        try:
-            node = SimulatorNode()
-        except (SceneError, ParameterException) as e:
-            print(f"simulator: error: {e}", file=sys.stderr)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        spin = threading.Thread(target=executor.spin, daemon=True)
-        spin.start()
         return run_node(node, stop)
     finally:
-        restore()
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
-            spin.join(timeout=2.0)
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        executor.shutdown(timeout_sec=1.0)
+        spin.join(timeout=2.0)
+
+
+def main(args=None) -> int:
+    """Entry point (`ros2 run gyro_sim simulator`, console script `gyro-sim-simulator`)."""
+    return node_main("simulator", SimulatorNode, _spin_and_run, args)
 
 
 if __name__ == "__main__":
