@@ -77,7 +77,8 @@ class ControllerNode(Node):
                                  qos_profile(TOPIC_IMU))
         self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), TOPIC_KINETIC_MOMENT,
                                  lambda m: self._on(m, "L"), qos_profile(TOPIC_KINETIC_MOMENT))
-        self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}")
+        self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}"
+                               + _expected_time_constant(self.scene, cfg))
 
     # --- parameters --------------------------------------------------------------------------
     def _config(self, changed: dict) -> tuple:
@@ -140,6 +141,20 @@ class ControllerNode(Node):
         out = to_ros(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), fields)
         out.header.stamp = imu.header.stamp
         self.pub.publish(out)
+
+
+def _expected_time_constant(scene, cfg) -> str:
+    """For spin-up: ', expected time constant T s' ([K] (2.1) at θ = 0: J3/(k_e B0²)), else ''."""
+    if cfg.law != "spinup" or scene.rotor.conductor is None or scene.torque_model == "none":
+        return ""
+    from gyro_sim.conductor import conductor_model
+
+    from ..laws import spinup_time_constant
+
+    c = scene.rotor.conductor
+    k_e = conductor_model(c.kind, c.outer_radius, c.conductivity, thickness=c.thickness, n_modes=scene.modes).k_e
+    st = scene.stators[scene.stator_index(cfg.params.stator)]
+    return f", expected time constant {spinup_time_constant(scene.inertia[2], k_e, st.coil_constant, cfg.params.current):.4g} s"
 
 
 def _fields(law: str) -> set:
