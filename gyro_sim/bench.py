@@ -1,0 +1,1027 @@
+"""Work-precision benchmark: the project's integrator against the plain SciPy baseline.
+
+``gyro-sim bench [--quick] [--out DIR] [--scenes NAME ...]`` (:func:`bench_main`) runs, in one
+process and on the same scenes,
+
+* the project's integrator (``gyro_sim.run``) at every fidelity level the scene format knows
+  (``Scene.fidelity``), sweeping its accuracy knob ``integrator.steps_per_turn``;
+* the baseline a user would write: :func:`scipy.integrate.solve_ivp` (DOP853 and LSODA) over a
+  NumPy right-hand side of the same model (:func:`numpy_rhs`), sweeping rtol 1e-3 … 1e-10 with
+  atol = rtol × the scale of each state component;
+
+and measures CPU and wall time, steps, right-hand-side evaluations and the error of the final state
+against a converged reference (our integrator at a high steps_per_turn, cross-checked against
+DOP853 at rtol 1e-12). It also measures the cost of 50 against 1 solid-sphere modes, the
+real-time factor of the default scene, the compiled kernels' cost per right-hand side and per
+step, and (full mode only) a 20-minute spin-up. It writes ``DIR/bench.md`` (tables, date,
+machine), ``DIR/bench.csv`` and ``DIR/work_precision.png``, and prints the headline ratios.
+
+Timings: each run's CPU time of this process (``time.process_time``) and its wall time. The
+headline ratios use CPU time, which other work on a shared machine disturbs far less than wall
+time; the real-time factors are wall-clock. Compare ratios measured in one run, never absolute
+times across runs. Errors are dimensionless:
+``error = max(|L − L_ref| / |L_ref|, min(|q − q_ref|, |q + q_ref|))`` of the final state; for a run
+of a reduced fidelity level that averaged out the spin phase (``RunResult.averaged_segments``) the
+attitude is not a result, and its error is that of L alone (``|L − L_ref| / |L_ref|``, marked).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as _dt
+import math
+import os
+import platform
+import sys
+import time
+import typing
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+__all__ = [
+    "numpy_rhs",
+    "final_error",
+    "Row",
+    "BenchConfig",
+    "quick_config",
+    "full_config",
+    "fidelity_levels",
+    "run_ours",
+    "run_baseline",
+    "cost_at_error",
+    "pareto_front",
+    "run_bench",
+    "write_outputs",
+    "bench_main",
+]
+
+DEFAULT_SCENES = ("spinup_thin_shell", "spinup_solid_sphere")
+TARGET_ERROR = 1e-6
+OURS = "gyro_sim"  # method label prefix of the project's integrator
+BASELINES = ("DOP853", "LSODA")
+
+
+# ----------------------------------------------------------------------------------------
+# the baseline's right-hand side: the model of docs/numerics.md in plain NumPy
+
+
+def numpy_rhs(sim) -> Callable[[float, np.ndarray], np.ndarray]:
+    """dy/dt of the full model as a NumPy function ``f(t, y)`` for ``solve_ivp``.
+
+    ``sim`` is a :class:`gyro_sim.Simulator`; the field is its present segment (phasors
+    referred to s = t − sim.t). State y = [L (case, N·m·s), q (w, x, y, z) body → case,
+    e_n (body, T) 3 per mode]; the model (docs/numerics.md):
+
+    * τ_n ė_n + e_n = −τ_n dB_b/dt,  dB_b/dt = Rᵀ dB/dt − Ω_b × B_b,  Ω_b = J⁻¹ Rᵀ L
+    * m_b = c (Σ w_n e_n − T_tail dB_b/dt),  dL/dt = N = (R m_b) × B
+    * dq/dt = ½ q ⊗ (0, Ω_b)
+
+    Rotations use q/|q| (as the compiled kernel does, so stage values off the unit sphere are
+    treated alike); the kinematics use q itself. Equal to ``kernels.nonlinear_part`` plus the
+    linear decay −e_n/τ_n to round-off (test/test_bench.py). Written as a user would: NumPy
+    arrays, explicit 3-vector cross products (``np.cross`` costs ~15 µs a call).
+    """
+    Bre, Bim, om = sim.phasors()
+    Bre = np.asarray(Bre, float).reshape(-1, 3)
+    Bim = np.asarray(Bim, float).reshape(-1, 3)
+    om = np.asarray(om, float)
+    omBre = om[:, None] * Bre
+    omBim = om[:, None] * Bim
+    Jinv = np.asarray(sim.Jinv, float)
+    c_m = float(sim.c_m)
+    w = np.asarray(sim.w, float)
+    inv_tau = 1.0 / np.asarray(sim.tau, float) if np.size(sim.tau) else np.zeros(0)
+    tail = float(sim.tail)
+    t_seg = float(sim.t)
+    n = 7 + 3 * inv_tau.size
+
+    def cross(a, b):
+        return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+    def f(t, y):
+        s = t - t_seg
+        c = np.cos(om * s)
+        sn = np.sin(om * s)
+        B = c @ Bre + sn @ Bim  # case frame, T
+        dB = c @ omBim - sn @ omBre  # T/s
+        q = y[3:7]
+        qw, qx, qy, qz = q / math.sqrt(q @ q)
+        R = np.array([[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
+                      [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
+                      [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)]])
+        Om = Jinv * (y[0:3] @ R)  # Ω_b = J⁻¹ Rᵀ L
+        out = np.empty(n)
+        w0, x0, y0, z0 = q
+        o0, o1, o2 = Om
+        out[3] = -0.5 * (x0 * o0 + y0 * o1 + z0 * o2)
+        out[4] = 0.5 * (w0 * o0 + y0 * o2 - z0 * o1)
+        out[5] = 0.5 * (w0 * o1 + z0 * o0 - x0 * o2)
+        out[6] = 0.5 * (w0 * o2 + x0 * o1 - y0 * o0)
+        e = y[7:].reshape(-1, 3)
+        if c_m == 0.0:
+            out[0:3] = 0.0
+            out[7:] = (-e * inv_tau[:, None]).ravel()
+            return out
+        Bb = B @ R
+        dBb = dB @ R - cross(Om, Bb)
+        mb = c_m * (w @ e - tail * dBb)
+        out[0:3] = cross(R @ mb, B)
+        out[7:] = (-e * inv_tau[:, None] - dBb).ravel()
+        return out
+
+    return f
+
+
+def final_error(L: np.ndarray, q: Optional[np.ndarray], L_ref: np.ndarray, q_ref: np.ndarray) -> float:
+    """max(|L − L_ref|/|L_ref|, min(|q − q_ref|, |q + q_ref|)) of final states (q normalised).
+
+    ``q = None``: the error of L alone (a run whose attitude phase was averaged out).
+    """
+    L, L_ref = np.asarray(L, float), np.asarray(L_ref, float)
+    eL = float(np.linalg.norm(L - L_ref) / max(np.linalg.norm(L_ref), 1e-300))
+    if q is None:
+        return eL
+    q, q_ref = np.asarray(q, float), np.asarray(q_ref, float)
+    q = q / np.linalg.norm(q)
+    q_ref = q_ref / np.linalg.norm(q_ref)
+    eq = float(min(np.linalg.norm(q - q_ref), np.linalg.norm(q + q_ref)))
+    return max(eL, eq)
+
+
+# ----------------------------------------------------------------------------------------
+# measurements
+
+
+@dataclass
+class Row:
+    """One measured run. ``knob``/``value``: steps_per_turn or rtol; ``error`` NaN if not known."""
+
+    scene: str
+    horizon: float  # simulated s
+    method: str
+    knob: str
+    value: float
+    wall: float  # s
+    steps: int
+    rhs: Optional[int]  # right-hand-side evaluations (None: not counted by that method)
+    error: float = float("nan")
+    note: str = ""
+    L: Optional[np.ndarray] = field(default=None, repr=False)
+    q: Optional[np.ndarray] = field(default=None, repr=False)
+    averaged: float = 0.0  # simulated s spent in an averaged model (its attitude phase is not a result)
+    error_L: float = float("nan")  # |L − L_ref| / |L_ref| alone (comparable across fidelity levels)
+    cpu: float = float("nan")  # s, CPU time of this process for the run (time.process_time)
+
+    def score(self, L_ref: np.ndarray, q_ref: np.ndarray) -> float:
+        """Set and return ``error`` against a reference: of (L, q), or of L alone where averaged."""
+        self.error_L = final_error(self.L, None, L_ref, q_ref)
+        self.error = final_error(self.L, None if self.averaged > 0 else self.q, L_ref, q_ref)
+        if self.averaged > 0 and "L only" not in self.note:
+            self.note = (self.note + "; " if self.note else "") + \
+                f"averaged {self.averaged:.3g} s of {self.horizon:g} s: error of L only"
+        return self.error
+
+    @property
+    def rtf(self) -> float:
+        """Real-time factor: simulated seconds per wall second."""
+        return self.horizon / self.wall if self.wall > 0 else float("inf")
+
+    @property
+    def rtf_cpu(self) -> float:
+        """Simulated seconds per CPU second."""
+        return self.horizon / self.cpu if self.cpu > 0 else float("nan")
+
+    @property
+    def setting(self) -> str:
+        if self.knob == "rtol":
+            return f"rtol={self.value:.0e}"
+        return f"{self.knob}={self.value:g}"
+
+
+def fidelity_levels() -> list[str]:
+    """The fidelity levels the scene format accepts (``Scene.fidelity``), 'full' first."""
+    from .scene import Scene
+
+    fld = Scene.model_fields.get("fidelity")
+    levels = [a for a in typing.get_args(fld.annotation) if isinstance(a, str)] if fld is not None else []
+    if not levels:
+        levels = ["full"]
+    return sorted(set(levels), key=lambda s: (s != "full", s))
+
+
+def _method_label(level: str) -> str:
+    return f"{OURS} {level}" + (" (ETDRK4)" if level == "full" else "")
+
+
+def _timed(fn: Callable, min_wall: float = 0.0, max_reps: int = 1):
+    """Run fn() until ``min_wall`` s in total or ``max_reps`` times.
+
+    Returns (wall s, CPU s, result) of the repeat with the least CPU time (``time.process_time``:
+    this process's CPU time, which other work on a shared machine disturbs far less than wall time).
+    """
+    best, total, reps, out = (math.inf, math.inf), 0.0, 0, None
+    while True:
+        w0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        w, c = time.perf_counter() - w0, time.process_time() - c0
+        if c < best[1]:
+            best = (w, c)
+        total, reps = total + w, reps + 1
+        if reps >= max_reps or total >= min_wall:
+            return best[0], best[1], out
+
+
+def _scene_overrides(spt: Optional[int], level: str, extra: Optional[dict]) -> dict:
+    ov: dict = {"controller": None}
+    if spt is not None:
+        ov["integrator.steps_per_turn"] = int(spt)
+    if level != "full":
+        ov["fidelity"] = level
+    ov.update(extra or {})
+    return ov
+
+
+def run_ours(scene_name: str, horizon: float, spt: Optional[int] = None, level: str = "full",
+             extra: Optional[dict] = None, min_wall: float = 0.0, max_reps: int = 1) -> Row:
+    """``gyro_sim.run`` of the scene (controller removed) over ``horizon`` s; wall includes setup.
+
+    RHS evaluations of the full level: 4 per ETDRK4 step + 1 per output sample (the torque).
+    """
+    from .scene import load_scene
+    from .simulate import run
+
+    scene = load_scene(scene_name, overrides=_scene_overrides(spt, level, extra))
+    wall, cpu, res = _timed(lambda: run(scene, duration=horizon), min_wall, max_reps)
+    steps = int(res.steps)
+    # ETDRK4: 4 per step + 1 per output sample; an averaged stretch adds its own (solve_ivp) count
+    rhs = 4 * steps + int(res.t.size) + int(getattr(res, "averaged_rhs_evaluations", 0) or 0)
+    segments = getattr(res, "averaged_segments", None) or []
+    value = float(spt if spt is not None else scene.integrator.steps_per_turn)
+    return Row(scene_name, horizon, _method_label(level), "steps_per_turn", value, wall, steps, int(rhs),
+               L=res.L[-1].copy(), q=res.q[-1].copy(), averaged=float(sum(t1 - t0 for t0, t1 in segments)),
+               cpu=cpu)
+
+
+def state_scale(sim, L_scale: float) -> np.ndarray:
+    """Per-component scale of the state for atol: |L| scale, 1 for q, the field amplitude for e_n."""
+    Bre, Bim, _ = sim.phasors()
+    B_amp = float(np.sum(np.sqrt(np.sum(np.asarray(Bre) ** 2 + np.asarray(Bim) ** 2, axis=-1)))) or 1.0
+    return np.concatenate([np.full(3, L_scale), np.ones(4), np.full(sim.y.size - 7, B_amp)])
+
+
+def run_baseline(scene_name: str, horizon: float, method: str, rtol: float, L_scale: float,
+                 extra: Optional[dict] = None, min_wall: float = 0.0, max_reps: int = 1) -> Row:
+    """``solve_ivp(method)`` over :func:`numpy_rhs`, segment by segment between the scene's commands.
+
+    atol = rtol × :func:`state_scale`. The scene's controller is removed (as for our runs);
+    its scheduled commands are applied at their instants (field steps as in the simulator).
+    Repeated like :func:`run_ours` (``min_wall``, ``max_reps``; the least wall time is kept).
+    """
+    from .scene import load_scene
+
+    scene = load_scene(scene_name, overrides=_scene_overrides(None, "full", extra))
+    wall, cpu, (sim, nfev, steps) = _timed(lambda: _baseline_once(scene, horizon, method, rtol, L_scale),
+                                           min_wall, max_reps)
+    return Row(scene_name, horizon, f"solve_ivp {method}", "rtol", rtol, wall, steps, nfev,
+               L=sim.y[0:3].copy(), q=sim.y[3:7].copy(), cpu=cpu)
+
+
+def _baseline_once(scene, horizon: float, method: str, rtol: float, L_scale: float):
+    from scipy.integrate import solve_ivp
+
+    from .simulate import Simulator
+
+    sim = Simulator(scene)
+    atol = rtol * state_scale(sim, L_scale)
+    cmds = sorted((c for c in scene.commands if c.time < horizon), key=lambda c: c.time)
+    ci = 0
+
+    def apply_due(t):
+        nonlocal ci
+        while ci < len(cmds) and cmds[ci].time <= t:
+            c = cmds[ci]
+            sim.set_stator(sim.stator_names.index(c.stator), current=c.current, rate=c.rate)
+            ci += 1
+
+    apply_due(0.0)
+    stops = sorted({c.time for c in cmds if 0.0 < c.time < horizon} | {horizon})
+    nfev = steps = 0
+    for t_next in stops:
+        sol = solve_ivp(numpy_rhs(sim), (sim.t, t_next), sim.y.copy(), method=method, rtol=rtol, atol=atol)
+        if sol.status != 0:
+            raise RuntimeError(f"solve_ivp {method} rtol={rtol:g}: {sol.message}")
+        y = sol.y[:, -1].copy()
+        y[3:7] /= np.linalg.norm(y[3:7])
+        sim.y[:] = y
+        sim.phase = np.mod(sim.phase + sim.rate * (t_next - sim.t), 2 * math.pi)
+        sim.t = t_next
+        nfev += int(sol.nfev)
+        steps += int(sol.t.size - 1)
+        apply_due(t_next)
+    return sim, nfev, steps
+
+
+def pareto_front(rows: Sequence[Row], key: str = "wall") -> list[tuple[float, float]]:
+    """(error, cost) of the runs no other run beats in both, by increasing cost (so decreasing error)."""
+    pts = sorted((getattr(r, key), r.error) for r in rows
+                 if r.error > 0 and math.isfinite(r.error) and getattr(r, key) not in (None, 0))
+    front: list[tuple[float, float]] = []
+    for c, e in pts:
+        if not front or e < front[-1][0]:
+            front.append((e, c))
+    return front
+
+
+def cost_at_error(rows: Sequence[Row], target: float = TARGET_ERROR, key: str = "wall") -> float:
+    """Cost (``cpu``, ``wall`` or ``rhs``) of one method at error ``target``, by log-log interpolation.
+
+    The curve is the method's Pareto front (:func:`pareto_front`: the best a user gets by choosing
+    the setting, so a setting that happens to cost more for less accuracy, as LSODA's stiffness
+    switching sometimes does, does not count against the method). The two front points whose
+    errors bracket the target are interpolated in log-log. If every run is already below the
+    target (a method whose step is set by stability, not by its tolerance), the cheapest run's
+    cost is returned (see :func:`below_target`); NaN if no run reaches the target.
+    """
+    front = pareto_front(rows, key)
+    for (e0, c0), (e1, c1) in zip(front, front[1:]):
+        if e1 <= target <= e0:
+            a = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
+            return math.exp(math.log(c0) + a * (math.log(c1) - math.log(c0)))
+    if front and front[0][0] <= target:
+        return float(front[0][1])
+    return float("nan")
+
+
+def below_target(rows: Sequence[Row], target: float = TARGET_ERROR) -> bool:
+    """Whether every run of a method has an error below ``target`` (its curve never crosses it)."""
+    errs = [r.error for r in rows if math.isfinite(r.error)]
+    return bool(errs) and all(e <= target for e in errs)
+
+
+# ----------------------------------------------------------------------------------------
+# configuration
+
+
+@dataclass
+class BenchConfig:
+    """What to run. Horizons in simulated seconds; ``None`` for a part = skip it."""
+
+    mode: str
+    scenes: tuple = DEFAULT_SCENES
+    horizon: dict = field(default_factory=dict)  # scene → horizon of the comparison (all methods)
+    default_horizon: float = 0.2
+    steps_per_turn: tuple = (6, 12, 24, 48, 96, 192, 384, 768)
+    spt_ref: int = 3072
+    rtols: tuple = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+    rtol_ref: float = 1e-12
+    baselines: tuple = BASELINES
+    long_horizon_scenes: tuple = ()  # our integrator only, over the scene's whole duration
+    long_spt_ref: int = 1536
+    mode_scene: Optional[str] = "spinup_solid_sphere"
+    mode_counts: tuple = (1, 50)
+    mode_horizon: float = 1.0
+    mode_baseline_horizon: Optional[float] = None  # baseline cost of 1 vs 50 modes (rtol 1e-6)
+    rtf_scene: Optional[str] = "spinup_thin_shell"
+    rtf_duration: Optional[float] = None  # None: the scene's duration
+    spinup_duration: Optional[float] = None  # the 20-minute spin-up (full mode): 1200 s
+    profile: bool = True
+    min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
+    max_reps: int = 5
+
+    def horizon_of(self, scene: str) -> float:
+        return float(self.horizon.get(scene, self.default_horizon))
+
+
+def quick_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
+    """Under a minute: 0.2 s horizons (100 turns of the default scene's field), every tolerance."""
+    return BenchConfig(mode="quick", scenes=tuple(scenes), default_horizon=0.2,
+                       horizon={"spinup_thin_shell": 0.2, "spinup_solid_sphere": 0.2},
+                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3)
+
+
+def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
+    """A few minutes: 2 s comparison horizons, whole-duration curves of our integrator, the
+    baseline's cost with 1 and 50 modes and the 20-minute spin-up."""
+    return BenchConfig(mode="full", scenes=tuple(scenes), default_horizon=2.0,
+                       horizon={"spinup_thin_shell": 2.0, "spinup_solid_sphere": 2.0},
+                       spt_ref=3072, long_horizon_scenes=("spinup_thin_shell",), long_spt_ref=1536,
+                       mode_horizon=10.0, mode_baseline_horizon=0.1, spinup_duration=1200.0,
+                       min_wall=0.3, max_reps=5)
+
+
+# ----------------------------------------------------------------------------------------
+# the parts of the benchmark
+
+
+def _say(msg: str) -> None:
+    print(msg, flush=True)
+
+
+@dataclass
+class Results:
+    config: BenchConfig
+    rows: list = field(default_factory=list)  # work-precision rows (all scenes, methods)
+    refs: list = field(default_factory=list)  # dicts: scene, horizon, ref method, agreement
+    headline: list = field(default_factory=list)  # dicts: scene, horizon, method, wall@1e-6, rhs@1e-6, speed-up
+    modes: list = field(default_factory=list)  # dicts of the mode-cost part
+    rtf: list = field(default_factory=list)  # dicts: scene, duration, wall, steps, rtf
+    spinup: list = field(default_factory=list)
+    profile: list = field(default_factory=list)  # dicts: what, ns
+    notes: list = field(default_factory=list)
+    started: str = ""
+    command: str = ""
+    wall_total: float = 0.0
+
+
+def _line(r: Row) -> str:
+    return (f"    {r.method:24s} {r.setting:20s} cpu {r.cpu:9.4f} s  wall {r.wall:9.4f} s  steps {r.steps:9d}  "
+            f"error {r.error:.2e}")
+
+
+def work_precision(res: Results, scene: str, horizon: float, with_baselines: bool = True,
+                   spt_ref: Optional[int] = None) -> None:
+    """Every method on one scene and horizon against one converged reference; fills res.rows."""
+    cfg = res.config
+    spt_ref = spt_ref or cfg.spt_ref
+    _say(f"[{scene}, {horizon:g} s] reference: {OURS} full, steps_per_turn={spt_ref}")
+    ref = run_ours(scene, horizon, spt_ref)
+    ref.note = "reference"
+    L_ref, q_ref = ref.L, ref.q
+    L_scale = float(np.linalg.norm(L_ref)) or 1.0
+    ref_info = {"scene": scene, "horizon": horizon, "reference": f"{OURS} full, steps_per_turn={spt_ref}",
+                "check": "", "agreement": float("nan"), "ref_cpu": ref.cpu, "check_cpu": float("nan")}
+    if with_baselines and cfg.rtol_ref:
+        chk = run_baseline(scene, horizon, "DOP853", cfg.rtol_ref, L_scale)
+        ref_info.update(check=f"solve_ivp DOP853 rtol={cfg.rtol_ref:.0e}",
+                        agreement=final_error(chk.L, chk.q, L_ref, q_ref), check_cpu=chk.cpu)
+        _say(f"    cross-check DOP853 rtol={cfg.rtol_ref:.0e}: agreement {ref_info['agreement']:.2e}")
+    res.refs.append(ref_info)
+    rows: list[Row] = []
+    for level in fidelity_levels():
+        for spt in cfg.steps_per_turn:
+            try:
+                r = run_ours(scene, horizon, spt, level, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+            except Exception as exc:  # a level that does not apply to this scene
+                res.notes.append(f"{scene}: {_method_label(level)} skipped: {exc}".splitlines()[0])
+                _say(f"    {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
+                break
+            r.score(L_ref, q_ref)
+            rows.append(r)
+            _say(_line(r))
+    if with_baselines:
+        for method in cfg.baselines:
+            for rtol in cfg.rtols:
+                r = run_baseline(scene, horizon, method, rtol, L_scale, min_wall=cfg.min_wall,
+                                 max_reps=cfg.max_reps)
+                r.score(L_ref, q_ref)
+                rows.append(r)
+                _say(_line(r))
+    for r in rows:
+        if not with_baselines:
+            r.note = "our integrator only (whole scene)" + ("; " + r.note if r.note else "")
+        if r.method.startswith(OURS) and r.method != _method_label("full") and r.averaged == 0:
+            r.note = (r.note + "; " if r.note else "") + "never averaged here (= full model)"
+    res.rows.extend(rows)
+    # headline: cost at the target error, speed-up of each method over the baselines
+    by_method: dict[str, list[Row]] = {}
+    for r in rows:
+        by_method.setdefault(r.method, []).append(r)
+    costs = {m: tuple(cost_at_error(rs, TARGET_ERROR, k) for k in ("cpu", "rhs", "wall"))
+             for m, rs in by_method.items()}
+    ours_full = costs.get(_method_label("full"), (float("nan"),) * 3)
+    def ratio(a, b):
+        return a / b if math.isfinite(a) and math.isfinite(b) and b > 0 else float("nan")
+
+    for m, (cc, cr, cw) in costs.items():
+        Lrows = [replace(r, error=r.error_L) for r in by_method[m]]
+        res.headline.append({"scene": scene, "horizon": horizon, "method": m, "cpu": cc, "wall": cw, "rhs": cr,
+                             "flat": below_target(by_method[m]), "whole": not with_baselines,
+                             "cpu_L": cost_at_error(Lrows, TARGET_ERROR, "cpu"),
+                             "best": min((r.error for r in by_method[m]), default=float("nan")),
+                             "speedup": ratio(cc, ours_full[0]), "speedup_wall": ratio(cw, ours_full[2]),
+                             "rhs_ratio": ratio(cr, ours_full[1])})
+
+
+def mode_cost(res: Results) -> None:
+    """Our integrator on the solid sphere with 1 and 50 modes (default steps_per_turn); baseline too."""
+    cfg = res.config
+    scene, T = cfg.mode_scene, cfg.mode_horizon
+    out = {}
+    for n in cfg.mode_counts:
+        r = run_ours(scene, T, None, "full", {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+        out[n] = r
+        res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting, "horizon": T,
+                          "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs, "rtf": r.rtf,
+                          "ns_per_step": 1e9 * r.cpu / max(r.steps, 1)})
+        _say(f"[modes] {scene} modes={n}: cpu {r.cpu:.4f} s, wall {r.wall:.4f} s, steps {r.steps}, "
+             f"{r.rtf:.1f}x real time")
+    if cfg.mode_baseline_horizon:
+        Tb = cfg.mode_baseline_horizon
+        for method in cfg.baselines:
+            for n in cfg.mode_counts:
+                ref = run_ours(scene, Tb, None, "full", {"modes": int(n)})
+                r = run_baseline(scene, Tb, method, 1e-6, float(np.linalg.norm(ref.L)) or 1.0, {"modes": int(n)})
+                res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting,
+                                  "horizon": Tb, "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs,
+                                  "rtf": r.rtf, "ns_per_step": 1e9 * r.cpu / max(r.steps, 1)})
+                _say(f"[modes] {scene} modes={n} {r.method} rtol=1e-6 over {Tb:g} s: cpu {r.cpu:.3f} s, "
+                     f"steps {r.steps}, RHS {r.rhs}")
+
+
+def _averaged_time(r) -> float:
+    return float(sum(t1 - t0 for t0, t1 in (getattr(r, "averaged_segments", None) or [])))
+
+
+def realtime_factor(res: Results) -> None:
+    """The default scene as a user runs it (controller included), whole duration, at each fidelity level."""
+    from .scene import load_scene
+    from .simulate import run
+
+    cfg = res.config
+    L_full = None
+    for level in fidelity_levels():
+        try:
+            scene = load_scene(cfg.rtf_scene, overrides=None if level == "full" else {"fidelity": level})
+            T = cfg.rtf_duration or scene.duration
+            wall, cpu, r = _timed(lambda: run(scene, duration=T), 0.0, 1)
+        except Exception as exc:
+            res.notes.append(f"real-time factor: {_method_label(level)} skipped: {exc}".splitlines()[0])
+            _say(f"[real time] {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
+            continue
+        res.rtf.append({"scene": cfg.rtf_scene, "method": _method_label(level),
+                        "what": "as shipped (controller on, output samples)", "duration": T, "wall": wall,
+                        "cpu": cpu, "steps": int(r.steps), "rtf": T / wall, "rtf_cpu": T / cpu,
+                        "averaged": _averaged_time(r),
+                        "error_L": float("nan") if L_full is None else final_error(r.L[-1], None, L_full, None),
+                        "spin_rev_s": float(r.spin_rate[-1] / (2 * math.pi)),
+                        "theta_deg": float(np.degrees(r.theta[-1]))})
+        if level == "full":
+            L_full = r.L[-1].copy()
+        _say(f"[real time] {cfg.rtf_scene} {T:g} s, {_method_label(level)}: wall {wall:.3f} s, cpu {cpu:.3f} s, "
+             f"steps {r.steps}, real-time factor {T / wall:.1f} (per CPU second {T / cpu:.1f})")
+
+
+def long_spinup(res: Results) -> None:
+    """20-minute spin-up of the default scene without its controller, at each fidelity level.
+
+    Error estimate of the default steps_per_turn from the run at twice as many steps (4th order:
+    err(h) ≈ |y(h) − y(h/2)| · 16/15); other levels against the run at twice the steps (of L alone
+    where they averaged the spin phase out).
+    """
+    from .scene import load_scene
+    from .simulate import run
+
+    cfg = res.config
+    T = cfg.spinup_duration
+    base = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None})
+    spt0 = base.integrator.steps_per_turn
+    runs = {}
+    for spt in (spt0, 2 * spt0):
+        sc = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None,
+                                                        "integrator.steps_per_turn": spt})
+        wall, cpu, r = _timed(lambda: run(sc), 0.0, 1)
+        runs[spt] = (wall, cpu, r)
+        _say(f"[spin-up {T:g} s] {_method_label('full')} steps_per_turn={spt}: wall {wall:.1f} s, cpu {cpu:.1f} s, "
+             f"steps {r.steps}, "
+             f"spin {r.spin_rate[-1] / (2 * math.pi):.2f} rev/s")
+    (w1, c1, r1), (w2, c2, r2) = runs[spt0], runs[2 * spt0]
+    d = final_error(r1.L[-1], r1.q[-1], r2.L[-1], r2.q[-1])
+    dL = final_error(r1.L[-1], None, r2.L[-1], None)
+    target = next((s.rate for s in base.stators if s.current > 0), float("nan"))
+
+    def entry(method, setting, w, c, r, err, errL):
+        return {"method": method, "setting": setting, "duration": T, "wall": w, "cpu": c, "steps": int(r.steps),
+                "rtf": T / w, "rtf_cpu": T / c, "error": err, "error_L": errL, "averaged": _averaged_time(r),
+                "spin_rev_s": float(r.spin_rate[-1] / (2 * math.pi)),
+                "spin_fraction": float(r.spin_rate[-1] / target), "theta_deg": float(np.degrees(r.theta[-1]))}
+
+    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={spt0}", w1, c1, r1, d * 16 / 15, dL * 16 / 15))
+    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={2 * spt0}", w2, c2, r2, d / 15, dL / 15))
+    for level in fidelity_levels():
+        if level == "full":
+            continue
+        try:
+            sc = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None, "fidelity": level})
+            w, c, r = _timed(lambda: run(sc), 0.0, 1)
+        except Exception as exc:
+            res.notes.append(f"spin-up: {_method_label(level)} skipped: {exc}".splitlines()[0])
+            _say(f"[spin-up {T:g} s] {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
+            continue
+        avg = _averaged_time(r) > 0
+        e = entry(_method_label(level), "scene defaults", w, c, r,
+                  float("nan") if avg else final_error(r.L[-1], r.q[-1], r2.L[-1], r2.q[-1]),
+                  final_error(r.L[-1], None, r2.L[-1], None))
+        res.spinup.append(e)
+        _say(f"[spin-up {T:g} s] {_method_label(level)}: wall {w:.2f} s, averaged {e['averaged']:.1f} s, "
+             f"error of L {e['error_L']:.1e}")
+
+
+def profile_kernels(res: Results) -> None:
+    """Cost of the compiled pieces on the default scene (thin shell) and the solid sphere.
+
+    ns per right-hand side (``kernels.nonlinear_part`` in a compiled loop), per field evaluation
+    (``kernels.field_case``), per ETDRK4 step (``kernels.integrate_etd`` over one long span), the
+    NumPy baseline's right-hand side, and the Python cost of one ``Simulator.advance`` call.
+    """
+    from . import kernels
+    from .scene import load_scene
+    from .simulate import Simulator
+
+    loop_rhs, loop_field = _profile_loops()
+    cases = [("spinup_thin_shell", {}), (res.config.mode_scene or "spinup_solid_sphere", {"modes": 1}),
+             (res.config.mode_scene or "spinup_solid_sphere", {"modes": 50})]
+    for name, extra in cases:
+        sim = Simulator(load_scene(name, overrides=_scene_overrides(None, "full", extra)))
+        Bre, Bim, om = sim.phasors()
+        y = sim.y.copy()
+        F = np.zeros(y.size)
+        work = np.zeros(25)
+        args = (y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.tau.size, F, work)
+        label = name + (f" modes={extra['modes']}" if extra else "")
+        loop_rhs(10, *args)
+        loop_field(10, Bre, Bim, om, work[0:3], work[3:6])
+        n = 500_000
+        t_rhs = min(_once(lambda: loop_rhs(n, *args)) for _ in range(3)) / n
+        t_field = min(_once(lambda: loop_field(n, Bre, Bim, om, work[0:3], work[3:6])) for _ in range(3)) / n
+        h = sim._max_step(False)
+        k = 200_000
+        stops, rec = np.array([k * h]), np.array([False])
+        oy, oN = np.zeros((1, y.size)), np.zeros((1, 3))
+
+        def integ():
+            yy = sim.y.copy()
+            return kernels.integrate_etd(yy, 0.0, 0.0, stops, rec, h, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w,
+                                         sim.tail, sim.lam, oy, oN, 0)
+
+        integ()
+        t_step = min(_once(integ) for _ in range(3)) / k
+        f = numpy_rhs(sim)
+        m = 2000
+        t_np = min(_once(lambda: [f(1e-3, y) for _ in range(m)]) for _ in range(3)) / m
+        for what, sec in (("RHS, compiled (nonlinear_part)", t_rhs), ("field B, dB/dt (field_case)", t_field),
+                          ("ETDRK4 step (integrate_etd)", t_step), ("RHS, NumPy baseline", t_np)):
+            res.profile.append({"case": label, "what": what, "ns": sec * 1e9})
+        res.profile.append({"case": label, "what": "ETDRK4 step / compiled RHS", "ns": t_step / t_rhs,
+                            "unit": "ratio"})
+        _say(f"[profile] {label}: RHS {t_rhs * 1e9:.0f} ns, field {t_field * 1e9:.0f} ns, "
+             f"step {t_step * 1e9:.0f} ns ({t_step / t_rhs:.2f} RHS), NumPy RHS {t_np * 1e9:.0f} ns")
+    # Python cost of one call of Simulator.advance (tiny span: one step)
+    sim = Simulator(load_scene("spinup_thin_shell", overrides={"controller": None}))
+    h = sim._max_step(False)
+    m = 2000
+    t_adv = _once(lambda: [sim.advance(sim.t + 0.5 * h) for _ in range(m)]) / m
+    res.profile.append({"case": "spinup_thin_shell", "what": "Simulator.advance call of one step (Python + 1 step)",
+                        "ns": t_adv * 1e9})
+    _say(f"[profile] Simulator.advance of one step: {t_adv * 1e6:.1f} µs")
+
+
+_LOOPS: list = []
+
+
+def _profile_loops():
+    """Compiled loops around ``kernels.nonlinear_part`` and ``kernels.field_case`` (built once)."""
+    if not _LOOPS:
+        from numba import njit
+
+        from . import kernels
+
+        nonlinear_part, field_case = kernels.nonlinear_part, kernels.field_case
+
+        @njit(cache=False)
+        def loop_rhs(n, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
+            acc = 0.0
+            for i in range(n):
+                nonlinear_part(1e-7 * i, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work)
+                acc += F[0]
+            return acc
+
+        @njit(cache=False)
+        def loop_field(n, Bre, Bim, om, B, dB):
+            acc = 0.0
+            for i in range(n):
+                field_case(1e-7 * i, Bre, Bim, om, B, dB)
+                acc += B[0]
+            return acc
+
+        _LOOPS.extend([loop_rhs, loop_field])
+    return _LOOPS[0], _LOOPS[1]
+
+
+def _once(fn) -> float:
+    """CPU seconds of one call (time.process_time)."""
+    c0 = time.process_time()
+    fn()
+    return time.process_time() - c0
+
+
+def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
+    """Run every part of ``cfg``, write DIR/bench.md, bench.csv, work_precision.png; return the results."""
+    res = Results(cfg, started=_dt.datetime.now().astimezone().isoformat(timespec="seconds"), command=command)
+    w0 = time.perf_counter()
+    for scene in cfg.scenes:
+        work_precision(res, scene, cfg.horizon_of(scene))
+    for scene in cfg.long_horizon_scenes:
+        from .scene import load_scene
+
+        T = load_scene(scene).duration
+        work_precision(res, scene, T, with_baselines=False, spt_ref=cfg.long_spt_ref)
+    if cfg.mode_scene:
+        mode_cost(res)
+    if cfg.rtf_scene:
+        realtime_factor(res)
+    if cfg.spinup_duration:
+        long_spinup(res)
+    if cfg.profile:
+        profile_kernels(res)
+    res.wall_total = time.perf_counter() - w0
+    write_outputs(res, Path(out))
+    return res
+
+
+# ----------------------------------------------------------------------------------------
+# outputs
+
+
+def _fmt(x, spec: str = ".3g") -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, float) and not math.isfinite(x):
+        return "–"
+    return format(x, spec)
+
+
+def headline_lines(res: Results) -> list[str]:
+    """The headline ratios, one sentence each (printed and at the top of bench.md).
+
+    Costs are CPU seconds of this process (``time.process_time``); the wall-clock ratio follows in
+    brackets. Both come from the same runs.
+    """
+    lines = []
+    full = _method_label("full")
+    for h in res.headline:
+        if h["method"].startswith("solve_ivp"):
+            flat = (f"; every {h['method']} setting is below {TARGET_ERROR:.0e}, its step being set by "
+                    "stability: its cheapest run") if h.get("flat") else ""
+            ours = _ours(res, h)
+            lines.append(f"{h['scene']} ({h['horizon']:g} s): at error {TARGET_ERROR:.0e}, {full} is "
+                         f"{_fmt(h['speedup'], '.0f')}x faster than {h['method']} (CPU {_fmt(ours.get('cpu'), '.3g')} s "
+                         f"vs {_fmt(h['cpu'], '.3g')} s; wall-clock ratio {_fmt(h['speedup_wall'], '.0f')}x); "
+                         f"{h['method']} makes {_fmt(h['rhs_ratio'], '.2f')}x our RHS evaluations{flat}")
+        elif h.get("whole"):
+            reach = (f"costs {_fmt(h['cpu'], '.3g')} CPU s, {_fmt(h['horizon'] / h['cpu'], '.3g')} simulated s "
+                     f"per CPU s" if math.isfinite(h["cpu"]) else
+                     f"is out of reach (best {_fmt(h['best'], '.1e')})")
+            lines.append(f"{h['scene']} (whole {h['horizon']:g} s, no controller): {h['method']} at error "
+                         f"{TARGET_ERROR:.0e} {reach}; at |ΔL|/|L| = {TARGET_ERROR:.0e} alone: "
+                         f"{_fmt(h['cpu_L'], '.3g')} CPU s")
+        elif h["method"] != full:
+            lines.append(f"{h['scene']} ({h['horizon']:g} s): at error {TARGET_ERROR:.0e}, {h['method']} costs "
+                         f"{_fmt(h['speedup'], '.3g')}x the CPU time of {full}")
+    byn = {m["modes"]: m for m in res.modes if m["method"] == full}
+    ns = sorted(byn)
+    if len(ns) >= 2:
+        a, b = byn[ns[0]], byn[ns[-1]]
+        lines.append(f"{res.config.mode_scene}: {ns[-1]} modes cost {b['cpu'] / a['cpu']:.2f}x {ns[0]} mode "
+                     f"with {full} (same {a['steps']} steps over {a['horizon']:g} s: {b['steps'] == a['steps']}; "
+                     f"wall-clock ratio {b['wall'] / a['wall']:.2f}x)")
+    for m in res.config.baselines:
+        bb = {x["modes"]: x for x in res.modes if x["method"] == f"solve_ivp {m}"}
+        if len(bb) >= 2:
+            a, b = bb[min(bb)], bb[max(bb)]
+            lines.append(f"{res.config.mode_scene}: solve_ivp {m} rtol=1e-6: {max(bb)} modes cost "
+                         f"{b['cpu'] / a['cpu']:.0f}x {min(bb)} mode ({b['steps']} vs {a['steps']} steps "
+                         f"over {a['horizon']:g} s)")
+    for r in res.rtf:
+        avg = (f", {r['averaged']:.3g} s averaged, |ΔL|/|L| = {r['error_L']:.1e} vs full"
+               if r.get("averaged") else "")
+        lines.append(f"{r['scene']} ({r['duration']:g} s, {r['what']}), {r['method']}: real-time factor "
+                     f"{r['rtf']:.1f} (wall {r['wall']:.3g} s; {r['rtf_cpu']:.1f} per CPU second; "
+                     f"{r['steps']} steps{avg})")
+    for s in res.spinup:
+        avg = f", {s['averaged']:.0f} s averaged" if s.get("averaged") else ""
+        lines.append(f"spin-up {s['duration']:g} s, {s['method']} {s['setting']}: real-time factor {s['rtf']:.3g} "
+                     f"(wall {s['wall']:.3g} s, CPU {s['cpu']:.3g} s{avg}), error ≈ {_fmt(s['error'], '.1e')} "
+                     f"(L alone {_fmt(s['error_L'], '.1e')}), spin {s['spin_rev_s']:.1f} rev/s "
+                     f"({100 * s['spin_fraction']:.2f} % of the field rate)")
+    return lines
+
+
+def _ours(res: Results, h: dict) -> dict:
+    for x in res.headline:
+        if x["scene"] == h["scene"] and x["horizon"] == h["horizon"] and x["method"] == _method_label("full"):
+            return x
+    return {}
+
+
+CSV_FIELDS = ["scene", "horizon_s", "method", "knob", "value", "cpu_s", "wall_s", "steps", "rhs_evals", "error",
+              "error_L", "realtime_factor", "note"]
+
+
+def write_outputs(res: Results, out: Path) -> None:
+    """DIR/bench.csv (one line per work-precision run), DIR/bench.md, DIR/work_precision.png."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "bench.csv", "w", newline="") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(CSV_FIELDS)
+        for r in res.rows:
+            wr.writerow([r.scene, f"{r.horizon:g}", r.method, r.knob, f"{r.value:g}", f"{r.cpu:.6g}", f"{r.wall:.6g}",
+                         r.steps, "" if r.rhs is None else r.rhs, f"{r.error:.6g}", f"{r.error_L:.6g}",
+                         f"{r.rtf:.6g}", r.note])
+    (out / "bench.md").write_text(markdown(res))
+    plot_work_precision(res, out / "work_precision.png")
+
+
+def machine() -> str:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{platform.platform()}, {cpu or platform.machine()}, os.cpu_count() = {os.cpu_count()}"
+
+
+def versions() -> str:
+    import numba
+    import scipy
+
+    return (f"Python {platform.python_version()}, NumPy {np.__version__}, SciPy {scipy.__version__}, "
+            f"numba {numba.__version__}")
+
+
+def markdown(res: Results) -> str:
+    cfg = res.config
+    load = ""
+    if hasattr(os, "getloadavg"):
+        load = f" (load average at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())})"
+    L = [f"# gyro_sim work-precision benchmark ({cfg.mode})", "",
+         f"- date: {res.started}",
+         f"- machine: {machine()}{load}",
+         f"- software: {versions()}",
+         f"- command: `{res.command or 'gyro_sim.bench.run_bench'}`",
+         f"- total wall time of the benchmark: {res.wall_total:.1f} s",
+         "", "Compare the ratios of one run, not absolute times across runs. Costs are CPU seconds of the "
+         "benchmark's process (`time.process_time`, which other work on a shared machine disturbs far less "
+         "than wall time) with the wall-clock figures beside them. error = max(|L − L_ref|/|L_ref|, "
+         "|q − q_ref|) of the final state (of L alone for a run that averaged the spin phase out); "
+         "real-time factor = simulated s / wall s. Comparisons run each scene without its controller (the same "
+         "problem for every method).", "", "## Headline", ""]
+    L += [f"- {x}" for x in headline_lines(res)] or ["- (no comparison ran)"]
+    L += ["", "## References", "",
+          "| scene | horizon s | reference | CPU s | cross-check | CPU s | agreement |", "|---|---|---|---|---|---|---|"]
+    for r in res.refs:
+        L.append(f"| {r['scene']} | {r['horizon']:g} | {r['reference']} | {_fmt(r['ref_cpu'])} | {r['check'] or '–'} "
+                 f"| {_fmt(r['check_cpu'])} | {_fmt(r['agreement'], '.1e')} |")
+    L += ["", f"## Cost at error {TARGET_ERROR:.0e} (log-log interpolation along each method's Pareto front)", "",
+          "| scene | horizon s | method | CPU s | wall s | RHS evaluations | CPU / ours | wall / ours | RHS / ours "
+          "| CPU s at error of L alone | note |",
+          "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for h in res.headline:
+        note = "every setting below the target: cheapest run" if h.get("flat") else (
+            f"no setting reached the target (best {h['best']:.1e})" if not math.isfinite(h["cpu"]) else "")
+        L.append(f"| {h['scene']} | {h['horizon']:g} | {h['method']} | {_fmt(h['cpu'])} | {_fmt(h['wall'])} "
+                 f"| {_fmt(h['rhs'], '.3g')} | {_fmt(h['speedup'], '.3g')} | {_fmt(h['speedup_wall'], '.3g')} "
+                 f"| {_fmt(h['rhs_ratio'], '.3g')} | {_fmt(h['cpu_L'])} | {note} |")
+    L += ["", "## Work-precision tables", ""]
+    groups: dict = {}
+    for r in res.rows:
+        groups.setdefault((r.scene, r.horizon), []).append(r)
+    for (scene, T), rows in groups.items():
+        whole = any("whole scene" in r.note for r in rows)
+        L += [f"### {scene}, horizon {T:g} s" + (" (our integrator only, the whole scene)" if whole else ""), "",
+              "| method | setting | CPU s | wall s | steps | RHS evaluations | error | error of L | real-time factor "
+              "| note |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in rows:
+            note = r.note.replace("our integrator only (whole scene)", "").strip("; ")
+            L.append(f"| {r.method} | {r.setting} | {r.cpu:.4g} | {r.wall:.4g} | {r.steps} | {_fmt(r.rhs, 'd')} "
+                     f"| {r.error:.2e} | {r.error_L:.2e} | {r.rtf:.3g} | {note} |")
+        L.append("")
+    if res.modes:
+        L += ["## Cost of eddy modes", "",
+              "| scene | modes | method | setting | horizon s | CPU s | wall s | steps | RHS evaluations "
+              "| CPU ns per step | real-time factor |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for m in res.modes:
+            L.append(f"| {m['scene']} | {m['modes']} | {m['method']} | {m['setting']} | {m['horizon']:g} "
+                     f"| {m['cpu']:.4g} | {m['wall']:.4g} | {m['steps']} | {_fmt(m['rhs'], 'd')} "
+                     f"| {m['ns_per_step']:.4g} | {m['rtf']:.3g} |")
+        L.append("")
+    if res.rtf:
+        L += ["## Real-time factor of the default scene", "",
+              "| scene | method | run | duration s | wall s | CPU s | steps | averaged s | real-time factor "
+              "| per CPU s | final spin rev/s | final θ deg | L vs full |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in res.rtf:
+            L.append(f"| {r['scene']} | {r['method']} | {r['what']} | {r['duration']:g} | {r['wall']:.3g} "
+                     f"| {r['cpu']:.3g} | {r['steps']} | {r['averaged']:.3g} | {r['rtf']:.3g} | {r['rtf_cpu']:.3g} "
+                     f"| {r['spin_rev_s']:.2f} | {r['theta_deg']:.3g} | {_fmt(r['error_L'], '.1e')} |")
+        L.append("")
+    if res.spinup:
+        L += ["## 20-minute spin-up (spinup_thin_shell, no controller)", "",
+              "| method | setting | duration s | wall s | CPU s | steps | averaged s | real-time factor "
+              "| error (L, q) | error of L | spin rev/s | spin / field rate | θ deg |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for s in res.spinup:
+            L.append(f"| {s['method']} | {s['setting']} | {s['duration']:g} | {s['wall']:.4g} | {s['cpu']:.4g} "
+                     f"| {s['steps']} | {s['averaged']:.4g} | {s['rtf']:.3g} | {_fmt(s['error'], '.1e')} "
+                     f"| {_fmt(s['error_L'], '.1e')} | {s['spin_rev_s']:.2f} | {s['spin_fraction']:.6f} "
+                     f"| {s['theta_deg']:.3g} |")
+        L += ["", "Errors of the full model at steps_per_turn = N are estimated from the run at 2N (4th order: "
+              "|y_N − y_2N| · 16/15); other levels are compared with the 2N run (of L alone where they averaged "
+              "the spin phase out: their attitude is not a result there).", ""]
+    if res.profile:
+        L += ["## Where the time goes (compiled kernels; CPU ns, least of 3)", "", "| case | what | ns |",
+              "|---|---|---|"]
+        for p in res.profile:
+            val = f"{p['ns']:.2f} (ratio)" if p.get("unit") == "ratio" else f"{p['ns']:.4g}"
+            L.append(f"| {p['case']} | {p['what']} | {val} |")
+        L.append("")
+    if res.notes:
+        L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
+    return "\n".join(L) + "\n"
+
+
+def plot_work_precision(res: Results, path: Path) -> None:
+    """Log-log run time against error, one panel per scene/horizon, one line per method (Agg).
+
+    Solid lines: CPU time of the run (the costs the headline compares); dotted: its wall time."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    groups: dict = {}
+    for r in res.rows:
+        groups.setdefault((r.scene, r.horizon), []).append(r)
+    n = max(len(groups), 1)
+    fig = Figure(figsize=(6.0 * n, 4.6), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, n, squeeze=False)[0]
+    markers = ["o", "s", "^", "D", "v", "P", "X"]
+    for ax, ((scene, T), rows) in zip(axes, groups.items()):
+        methods: dict = {}
+        for r in rows:
+            methods.setdefault(r.method, []).append(r)
+        for i, (m, rs) in enumerate(methods.items()):
+            pts = [(r.error, r.cpu, r.wall) for r in rs if r.error > 0 and math.isfinite(r.error)]
+            if pts:
+                e = [p[0] for p in pts]
+                line, = ax.loglog(e, [p[1] for p in pts], marker=markers[i % len(markers)], label=m)
+                ax.loglog(e, [p[2] for p in pts], ls=":", lw=1, color=line.get_color(), alpha=0.6)
+        ax.axvline(TARGET_ERROR, color="0.6", ls="--", lw=1)
+        ax.set_xlabel("error of the final (L, q) vs reference")
+        ax.set_ylabel("run time, s (CPU; dotted: wall)")
+        ax.set_title(f"{scene}, {T:g} s simulated", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    if not groups:
+        axes[0].text(0.5, 0.5, "no runs", ha="center")
+    fig.suptitle(f"gyro_sim work-precision ({res.config.mode}, {res.started})", fontsize=10)
+    fig.savefig(path, dpi=110)
+
+
+# ----------------------------------------------------------------------------------------
+# command line
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="gyro-sim bench",
+        description="Work-precision benchmark: gyro_sim's integrator (every fidelity level) against "
+                    "scipy solve_ivp (DOP853, LSODA) on the same scenes; writes DIR/bench.md, bench.csv, "
+                    "work_precision.png and prints the headline ratios.")
+    p.add_argument("--quick", action="store_true", help="short horizons, under a minute")
+    p.add_argument("--out", metavar="DIR", type=Path, default=Path("runs/bench"),
+                   help="output folder (default: runs/bench)")
+    p.add_argument("--scenes", metavar="SCENE", nargs="+", default=list(DEFAULT_SCENES),
+                   help=f"scenes of the work-precision comparison (default: {' '.join(DEFAULT_SCENES)})")
+    return p
+
+
+def bench_main(argv: Optional[Sequence[str]] = None) -> int:
+    """``gyro-sim bench``: run the benchmark, write the files, print the headline. Returns 0 (2 on a bad scene)."""
+    from .scene import SceneError, load_scene
+
+    args = build_parser().parse_args(argv)
+    try:
+        for s in args.scenes:
+            load_scene(s)
+    except SceneError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    cfg = (quick_config if args.quick else full_config)(args.scenes)
+    command = "gyro-sim bench " + " ".join(sys.argv[1:] if argv is None else list(argv))
+    res = run_bench(cfg, args.out, command=command.strip())
+    print()
+    print("Headline (ratios measured in this run):")
+    for line in headline_lines(res):
+        print("  " + line)
+    print(f"wrote {args.out / 'bench.md'}, {args.out / 'bench.csv'}, {args.out / 'work_precision.png'} "
+          f"({res.wall_total:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(bench_main())

@@ -1,0 +1,140 @@
+"""The work-precision benchmark (gyro_sim.bench): its NumPy baseline is the compiled model, and it
+writes its three files with sane contents."""
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from gyro_sim import kernels, load_scene
+from gyro_sim.bench import (BenchConfig, Row, bench_main, cost_at_error, final_error, numpy_rhs, run_baseline,
+                            run_bench, run_ours)
+from gyro_sim.simulate import Simulator
+
+SCENES = [
+    ("spinup_thin_shell", {}),
+    ("spinup_solid_sphere", {"modes": 1}),
+    ("spinup_solid_sphere", {"modes": 50}),
+    ("spinup_thin_shell", {"torque_model": "quasi_static"}),
+    ("spinup_thin_shell", {"torque_model": "none"}),
+    ("free_rotor", {}),
+    ("rotating_field", {}),
+    # three stators with different rates, phases and a general field term on top
+    ("spinup_thin_shell", {"stators.0.current": 0.7, "stators.0.rate": -1200.0, "stators.0.phase": 0.3,
+                           "stators.1.current": 0.4, "stators.1.rate": 250.0,
+                           "field": [{"real": [1e-4, -2e-4, 3e-4], "imag": [0.0, 5e-5, -1e-4], "frequency": 77.0}]}),
+]
+
+
+@pytest.mark.parametrize("name,overrides", SCENES)
+def test_numpy_rhs_equals_compiled_kernel(name, overrides):
+    """numpy_rhs = kernels.nonlinear_part + the linear decay −e_n/τ_n, to round-off, at random states
+    (quaternions off the unit sphere, as at the stages of a step) and times."""
+    scene = load_scene(name, overrides={"controller": None, **overrides})
+    sim = Simulator(scene)
+    sim.t = 0.37  # the segment starts later than 0: the RHS must use s = t − t_seg
+    f = numpy_rhs(sim)
+    Bre, Bim, om = sim.phasors()
+    rng = np.random.default_rng(7)
+    n = sim.y.size
+    nm = sim.tau.size
+    J3 = scene.inertia[2]
+    for _ in range(20):
+        y = np.empty(n)
+        y[0:3] = rng.normal(size=3) * J3 * 3000.0
+        y[3:7] = rng.normal(size=4) * rng.uniform(0.8, 1.2)
+        y[7:] = rng.normal(size=n - 7) * 2e-3
+        t = sim.t + rng.uniform(0.0, 0.05)
+        F = np.zeros(n)
+        kernels.nonlinear_part(t - sim.t, y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, nm, F, np.zeros(25))
+        F += sim.lam * y
+        G = f(t, y)
+        assert G.shape == F.shape
+        for sl in (slice(0, 3), slice(3, 7), slice(7, n)):
+            if sl.start >= n:
+                continue
+            scale = max(np.max(np.abs(F[sl])), 1e-300)
+            assert np.max(np.abs(G[sl] - F[sl])) <= 1e-13 * scale, (sl, F[sl], G[sl])
+
+
+def test_final_error_is_sign_invariant_in_q():
+    L = np.array([0.0, 0.0, 2.0])
+    q = np.array([0.6, 0.0, 0.8, 0.0])
+    assert final_error(L, -q, L, q) == 0.0
+    assert final_error(L * (1 + 1e-6), q, L, q) == pytest.approx(1e-6)
+
+
+def test_cost_at_error_interpolates_log_log():
+    rows = [Row("s", 1.0, "m", "rtol", v, wall, 1, 10 * i + 10, error=err)
+            for i, (v, wall, err) in enumerate([(1e-3, 1.0, 1e-4), (1e-5, 10.0, 1e-8)])]
+    assert cost_at_error(rows, 1e-6) == pytest.approx(math.sqrt(10.0))
+    assert math.isnan(cost_at_error(rows[:1], 1e-6))  # never reaches the target
+    flat = [Row("s", 1.0, "m", "rtol", v, wall, 1, 1, error=1e-11) for v, wall in [(1e-3, 2.0), (1e-6, 3.0)]]
+    assert cost_at_error(flat, 1e-6) == 2.0  # every run below the target: the cheapest
+    # a setting that costs more for less accuracy (LSODA's stiffness switching) is off the Pareto front
+    bumpy = rows[:1] + [Row("s", 1.0, "m", "rtol", 1e-4, 50.0, 1, 1, error=2e-6)] + rows[1:]
+    assert cost_at_error(bumpy, 1e-6) == pytest.approx(math.sqrt(10.0))
+
+
+def test_baseline_and_ours_agree_on_a_short_horizon():
+    """The two integrate the same model: tight settings agree far below the benchmark's errors."""
+    ours = run_ours("spinup_thin_shell", 0.02, 768)
+    L_scale = float(np.linalg.norm(ours.L))
+    base = run_baseline("spinup_thin_shell", 0.02, "DOP853", 1e-11, L_scale)
+    assert final_error(base.L, base.q, ours.L, ours.q) < 1e-9
+    assert base.rhs > 0 and base.steps > 0 and ours.steps == 768 * 10
+
+
+def _check_outputs(out, scenes):
+    md = (out / "bench.md").read_text()
+    assert "machine:" in md and "date:" in md and "os.cpu_count()" in md
+    assert "Headline" in md and "real-time factor" in md
+    for s in scenes:
+        assert s in md
+    with open(out / "bench.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    methods = {r["method"] for r in rows}
+    assert "gyro_sim full (ETDRK4)" in methods
+    assert {"solve_ivp DOP853", "solve_ivp LSODA"} <= methods
+    for r in rows:
+        assert float(r["wall_s"]) > 0 and float(r["cpu_s"]) > 0 and int(r["steps"]) > 0
+        assert math.isfinite(float(r["error"])) and float(r["error"]) >= 0
+        assert float(r["realtime_factor"]) > 0
+    # errors fall as our knob tightens (4th order: by far more than 10x over a 16x range)
+    ours = [r for r in rows if r["method"] == "gyro_sim full (ETDRK4)" and r["scene"] == scenes[0]]
+    errs = [float(r["error"]) for r in sorted(ours, key=lambda r: float(r["value"]))]
+    assert errs[-1] < errs[0] / 100
+    png = (out / "work_precision.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_bench_smoke(tmp_path):
+    """A tiny configuration of every part but the profile: files written, ratios finite."""
+    cfg = BenchConfig(mode="smoke", scenes=("spinup_thin_shell",), default_horizon=0.01,
+                      steps_per_turn=(12, 48, 192), spt_ref=768, rtols=(1e-4, 1e-7), rtol_ref=1e-10,
+                      mode_horizon=0.05, rtf_duration=0.1, profile=False, min_wall=0.0, max_reps=1)
+    res = run_bench(cfg, tmp_path, command="smoke")
+    _check_outputs(tmp_path, ["spinup_thin_shell"])
+    assert res.refs[0]["agreement"] < 1e-8
+    assert len(res.modes) == 2 and res.modes[0]["steps"] == res.modes[1]["steps"]
+    assert res.rtf and res.rtf[0]["rtf"] > 0
+
+
+def test_bench_main_refuses_unknown_scene(tmp_path, capsys):
+    assert bench_main(["--quick", "--out", str(tmp_path), "--scenes", "no_such_scene"]) == 2
+    assert "error:" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bench_main_quick(tmp_path):
+    """``bench --quick``: under a minute, the three files, the headline printed."""
+    import time
+
+    w0 = time.perf_counter()
+    assert bench_main(["--quick", "--out", str(tmp_path)]) == 0
+    assert time.perf_counter() - w0 < 90.0  # < 60 s alone; margin for a loaded shared machine
+    _check_outputs(tmp_path, ["spinup_thin_shell", "spinup_solid_sphere"])
+    md = (tmp_path / "bench.md").read_text()
+    assert "Where the time goes" in md and "ns" in md
