@@ -409,6 +409,15 @@ def _cmd_scenes(args) -> int:
 
 def main(argv=None) -> int:
     """Entry point of ``gyro-sim``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in ("bench", "sweep"):  # these parse their own options (with their own --help)
+        if argv[0] == "bench":
+            from gyro_sim.bench import bench_main
+
+            return bench_main(argv[1:])
+        from gyro_sim.sweep import sweep_main
+
+        return sweep_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     return args.func(args)
