@@ -1,0 +1,428 @@
+"""Parameter sweeps (gyro_sim/sweep.py, ``gyro-sim sweep``): spec parsing, variants, metrics, failed
+and invalid runs, resume, the Parquet table, plots, the CLI, and execution on Dask — a local cluster
+and a real scheduler with workers started here as separate processes on 127.0.0.1 (same numbers as
+in-process). Runs are tiny (20 ms of nutation_oblate); ``-s`` prints the measured figures."""
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import gyro_sim
+from gyro_sim import sweep as sw
+from gyro_sim.averaged import RotorK
+
+TINY = {"duration": 0.02, "output.rate": 500.0}
+METRICS = {"theta_end": "final(theta_deg)", "spin_end": "final_spin", "t_half": "time_below(theta_deg, 9.99)",
+           "tmax": "max(torque_norm)", "L_drift": "drift(L_norm)", "sf": "k(sampling_factor)"}
+
+
+def tiny(**over) -> sw.SweepSpec:
+    d = {"scene": "nutation_oblate", "set": dict(TINY), "vary": {"controller.period": "0.001:0.004:4"},
+         "metrics": dict(METRICS)}
+    d.update(over)
+    return sw.spec_from_dict(d, where="test")
+
+
+def metric_table(res, names=None):
+    names = names or [m.name for m in res.spec.metrics]
+    return [(r["run_id"], r["status"], tuple(r[n] for n in names)) for r in res.rows]
+
+
+# ------------------------------------------------------------------------------------------
+# parsing
+# ------------------------------------------------------------------------------------------
+def test_grid_axes():
+    a = sw.parse_axis("controller.period", "0.004:0.02:5")
+    assert a.values == pytest.approx((0.004, 0.008, 0.012, 0.016, 0.02)) and a.values[-1] == 0.02
+    assert sw.parse_axis("modes", "2:10:5").values == (2, 4, 6, 8, 10)
+    assert sw.parse_axis("x", "1e-3:1e-1:3:log").values == pytest.approx((1e-3, 1e-2, 1e-1))
+    assert sw.parse_axis("x", "0.1, 0.2,0.5").values == (0.1, 0.2, 0.5)
+    assert sw.parse_axis("controller.params.nu", "[1000,2500]:[3000,7500]:3").values == (
+        [1000.0, 2500.0], [2000.0, 5000.0], [3000.0, 7500.0])
+    assert sw.parse_axis("x", {"start": 1, "stop": 3, "num": 3}).values == (1, 2, 3)
+    assert sw.parse_axis("x", {"values": ["1e-3", 2]}).values == (0.001, 2)
+    assert sw.parse_axis("x", [[1, 2], [3, 4]]).values == ([1, 2], [3, 4])
+    assert sw.parse_axis("x", "1:2:1").values == (1,)
+    for bad, msg in (("1:2:0", "must be ≥ 1"), ("1:2:x", "whole number"), ("0:1:3:log", "log spacing"),
+                     ("a:b:3", "must be numbers"), ("1:2", "START:STOP:N"), ("[1,2]:[1]:3", "one length"),
+                     ("1:2:3:cubic", "spacing")):
+        with pytest.raises(sw.SweepError, match=msg):
+            sw.parse_axis("x", bad)
+    with pytest.raises(sw.SweepError, match="dotted scene key"):
+        sw.parse_axis("controller..period", "1,2")
+
+
+def test_random_draws_are_reproducible_and_independent_per_key():
+    u = sw.parse_random("initial.theta", "uniform(0.1, 0.2)")
+    n = sw.parse_random("initial.psi", "normal(1, 0.5)")
+    lg = sw.parse_random("x", "loguniform(1e-3, 1e-1)")
+    ri = sw.parse_random("modes", "randint(2, 4)")
+    ch = sw.parse_random("torque_model", "choice(lag, quasi_static)")
+    draws = {r.key: [r.draw(7, s) for s in range(200)] for r in (u, n, lg, ri, ch)}
+    assert all(0.1 <= v <= 0.2 for v in draws["initial.theta"])
+    assert abs(np.mean(draws["initial.psi"]) - 1) < 0.15 and 0.35 < np.std(draws["initial.psi"]) < 0.65
+    assert all(1e-3 <= v <= 1e-1 for v in draws["x"]) and np.mean(np.log10(draws["x"])) == pytest.approx(-2, abs=0.2)
+    assert set(draws["modes"]) == {2, 3, 4} and set(draws["torque_model"]) == {"lag", "quasi_static"}
+    assert [u.draw(7, s) for s in range(5)] == draws["initial.theta"][:5]  # same seed, same draws
+    assert u.draw(8, 0) != u.draw(7, 0)
+    # a key's draws do not depend on the other keys of the sweep
+    s1 = tiny(vary={}, random={"initial.theta": "uniform(0.1, 0.2)"}, samples=3)
+    s2 = tiny(vary={}, random={"initial.theta": "uniform(0.1, 0.2)", "initial.psi": "uniform(0, 1)"}, samples=3)
+    assert [v.values["initial.theta"] for v in s1.variants()] == [v.values["initial.theta"] for v in s2.variants()]
+    for bad in ("uniform(1)", "uniform(2, 1)", "normal(0, -1)", "loguniform(0, 1)", "gauss(0, 1)", "choice()"):
+        with pytest.raises(sw.SweepError):
+            sw.parse_random("x", bad)
+
+
+def test_metric_specs():
+    assert sw.parse_metric("final_spin") == sw.Metric("final_spin", "final", ("spin",))
+    assert sw.parse_metric("t=time_below(theta_deg, 0.1)") == sw.Metric("t", "time_below", ("theta_deg", 0.1))
+    assert sw.parse_metric("max(torque_norm)").name == "max_torque_norm"
+    assert sw.parse_metric("k(time_to_deg, 1)").args == ("time_to_deg", 1)
+    for bad, msg in (("final(nope)", "unknown quantity"), ("time_below(theta_deg)", "takes 1 quantity and 1 number"),
+                     ("frobnicate(theta)", "unknown function"), ("status=final(spin)", "reserved"),
+                     ("k(zeta)", "k\\(NAME"), ("whatever", "unknown metric")):
+        with pytest.raises(sw.SweepError, match=msg):
+            sw.parse_metric(bad)
+
+
+def test_spec_errors_name_the_problem():
+    cases = [({"vary": {"initial.theta": "0:1:2"}, "random": {"initial.theta": "uniform(0,1)"}, "samples": 2},
+              "varied twice"),
+             ({"random": {"initial.theta": "uniform(0,1)"}}, "need a number of samples"),
+             ({"samples": 3}, "no random key"),
+             ({"set": {"controller.period": 0.001}}, "both fixed"),
+             ({"metrics": {"a": "final(spin)", "controller.period": "final(spin)"}}, "metric"),
+             ({"bogus": 1}, "unknown key"),
+             ({"scene": "no_such_scene"}, "no such file and no built-in scene")]
+    for over, msg in cases:
+        with pytest.raises(sw.SweepError, match=msg):
+            tiny(**over)
+
+
+# ------------------------------------------------------------------------------------------
+# variants and their runs (in this process)
+# ------------------------------------------------------------------------------------------
+def test_variants_grid_times_samples_with_stable_ids():
+    s = tiny(vary={"controller.period": "0.001,0.002", "initial.theta": "0.1:0.3:3"},
+             random={"initial.psi": "uniform(0, 6.28)"}, samples=2)
+    vs = s.variants()
+    assert len(vs) == 2 * 3 * 2
+    assert [v.values["controller.period"] for v in vs[:6]] == [0.001] * 6  # last axis and samples vary fastest
+    assert [v.sample for v in vs[:4]] == [0, 1, 0, 1]
+    ids = [v.run_id for v in vs]
+    assert len(set(ids)) == len(ids) and ids == [v.run_id for v in s.variants()]
+    other = tiny(vary={"controller.period": "0.001,0.002", "initial.theta": "0.1:0.3:3"},
+                 random={"initial.psi": "uniform(0, 6.28)"}, samples=2, set={"duration": 0.03})
+    assert not set(ids) & {v.run_id for v in other.variants()}  # the fixed overrides are in the key
+
+
+def test_serial_sweep_matches_direct_runs():
+    res = sw.run_sweep(tiny(), workers=0, progress=False)
+    assert res.n_total == res.n_run == 4 and res.n_failed == res.n_invalid == 0
+    for row in res.rows:
+        s = gyro_sim.load_scene("nutation_oblate", overrides={**TINY, "controller.period": row["controller.period"]})
+        r = gyro_sim.run(s)
+        assert row["theta_end"] == math.degrees(r.theta[-1])
+        assert row["spin_end"] == r.spin_rate[-1]
+        assert row["tmax"] == np.max(np.linalg.norm(r.torque, axis=1))
+        L = np.linalg.norm(r.L, axis=1)
+        assert row["L_drift"] == np.max(np.abs(L - L[0])) / L[0]
+        t_half = r.t[np.argmax(np.degrees(r.theta) < 9.99)] if np.any(np.degrees(r.theta) < 9.99) else math.inf
+        assert row["t_half"] == t_half
+        lam_h = s.initial.spin * s.inertia[2] / RotorK.of(s.inertia).J * row["controller.period"]
+        assert row["sf"] == pytest.approx(math.sin(lam_h) / lam_h, rel=1e-12)
+        assert row["status"] == "ok" and row["gyro_sim_version"] == gyro_sim.__version__
+
+
+def test_invalid_and_failed_variants_are_recorded_and_the_sweep_goes_on(monkeypatch):
+    real = sw._run_scene
+
+    def flaky(scene):
+        per = scene.controller.period
+        if per == 0.002:
+            raise RuntimeError("integrator blew up")
+        r = real(scene)
+        if per == 0.003:
+            r.L[3:] = np.nan
+        return r
+
+    monkeypatch.setattr(sw, "_run_scene", flaky)
+    spec = tiny(vary={"controller.period": "0.001:0.004:4", "initial.theta": "3.0,3.5"})
+    res = sw.run_sweep(spec, workers=0, progress=False)
+    by = {(r["controller.period"], r["initial.theta"]): r for r in res.rows}
+    assert len(res.rows) == 8 and res.n_invalid == 4 and res.n_failed == 2
+    for per in (0.001, 0.002, 0.003, 0.004):
+        bad = by[(per, 3.5)]
+        assert bad["status"] == "invalid" and "initial.theta" in bad["error"] and "3.5" in bad["error"]
+        assert math.isnan(bad["theta_end"])
+    assert by[(0.002, 3.0)]["status"] == "failed" and "integrator blew up" in by[(0.002, 3.0)]["error"]
+    assert by[(0.003, 3.0)]["status"] == "failed" and "non-finite state" in by[(0.003, 3.0)]["error"]
+    assert by[(0.001, 3.0)]["status"] == by[(0.004, 3.0)]["status"] == "ok"
+    print("\n" + "\n".join(f"  {r['status']}: {r['error']}" for r in res.rows if r["error"]))
+
+
+def test_resume_skips_what_is_done(tmp_path, monkeypatch):
+    out = tmp_path / "res.parquet"
+    spec = tiny(vary={"controller.period": "0.001:0.006:6"})
+    calls = []
+    real = sw._run_scene
+
+    def stop_after_two(scene):
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        calls.append(scene.controller.period)
+        return real(scene)
+
+    monkeypatch.setattr(sw, "_run_scene", stop_after_two)
+    first = sw.run_sweep(spec, out=out, workers=0, progress=False)
+    assert first.interrupted and len(first.rows) == 2 and out.is_file()
+    monkeypatch.setattr(sw, "_run_scene", real)
+    second = sw.run_sweep(spec, out=out, workers=0, progress=False)
+    assert second.n_skipped == 2 and second.n_run == 4 and not second.interrupted
+    third = sw.run_sweep(spec, out=out, workers=0, progress=False)
+    assert third.n_run == 0 and third.n_skipped == 6
+    assert metric_table(third) == metric_table(sw.run_sweep(spec, workers=0, progress=False))
+    # a hard stop before the table is written: the journal keeps the finished runs
+    out2 = tmp_path / "hard.parquet"
+
+    def no_disk(*a, **k):
+        raise OSError("disk gone")
+
+    monkeypatch.setattr(sw, "write_results", no_disk)
+    with pytest.raises(OSError):
+        sw.run_sweep(spec, out=out2, workers=0, progress=False)
+    assert not out2.exists() and sw._journal_path(out2).is_file()
+    monkeypatch.undo()
+    again = sw.run_sweep(spec, out=out2, workers=0, progress=False)
+    assert again.n_run == 0 and again.n_skipped == 6 and not sw._journal_path(out2).exists()
+    # a changed metric list is another sweep: its rows run anew, the old ones are dropped
+    spec2 = tiny(vary={"controller.period": "0.001:0.006:6"}, metrics={"theta_end": "final(theta_deg)"})
+    assert sw.run_sweep(spec2, out=out, workers=0, progress=False).n_run == 6
+    rows, _ = sw.read_results(out)
+    assert len(rows) == 6 and "spin_end" not in rows[0]
+
+
+def test_parquet_table_holds_parameters_metrics_series_and_version(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "t.parquet"
+    spec = tiny(vary={"controller.params.nu": "[3000,5000]:[4000,6000]:2"},
+                random={"initial.theta": "uniform(0.1,0.2)"}, samples=2, series=["theta_deg", "spin"],
+                series_points=20)
+    res = sw.run_sweep(spec, out=out, workers=0, progress=False)
+    t = pq.read_table(out)
+    cols = set(t.column_names)
+    assert {"run_id", "index", "sample", "status", "error", "gyro_sim_version", "controller.params.nu",
+            "initial.theta", "series.t", "series.theta_deg", "series.spin"} <= cols
+    assert set(METRICS) <= cols
+    typ = t.schema.field("controller.params.nu").type
+    assert pa.types.is_list(typ) and pa.types.is_float64(typ.value_type)
+    rows, meta = sw.read_results(out)
+    assert meta["grid"] == ["controller.params.nu"] and list(meta["random"]) == ["initial.theta"]
+    assert meta["metrics"]["t_half"] == "time_below(theta_deg,9.99)" and meta["gyro_sim_version"] == gyro_sim.__version__
+    assert meta["complete"] is True and meta["scene"]["name"] == "nutation_oblate"
+    assert [r["controller.params.nu"] for r in rows] == [[3000.0, 5000.0]] * 2 + [[4000.0, 6000.0]] * 2
+    assert all(len(r["series.t"]) <= 20 and len(r["series.theta_deg"]) == len(r["series.t"]) for r in rows)
+    assert rows[0]["series.theta_deg"][-1] == pytest.approx(rows[0]["theta_end"])
+    assert rows == [{k: r[k] for k in rows[0]} for r in res.rows]
+
+
+def test_plots(tmp_path):
+    one = sw.run_sweep(tiny(), workers=0, progress=False)
+    two = sw.run_sweep(tiny(vary={"controller.period": "0.001,0.002,0.003", "initial.theta": "0.1,0.2,4.0"}),
+                       workers=0, progress=False)
+    mc = sw.run_sweep(tiny(vary={}, random={"initial.theta": "uniform(0.1,0.3)"}, samples=12), workers=0,
+                      progress=False)
+    for name, r in (("one", one), ("two", two), ("mc", mc)):
+        png = sw.plot_sweep(r.rows, r.spec.meta(), tmp_path / f"{name}.png")
+        assert png.stat().st_size > 20_000
+        with open(png, "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------------------------------------
+# command line and built-in sweep files
+# ------------------------------------------------------------------------------------------
+def test_builtin_sweep_files_load_and_every_variant_validates():
+    names = sw.builtin_sweeps()
+    assert {"sweep_psi_rate", "sweep_k310_cycles", "sweep_k37_equilibria"} <= set(names)
+    assert not set(names) & set(gyro_sim.builtin_scenes())  # sweep files are not scenes
+    for name in names:
+        spec = sw.load_sweep(name)
+        vs = spec.variants()
+        for v in vs:
+            spec.scene_for(v.values)
+        print(f"  {name}: {len(vs)} variants of {spec.scene_ref}, metrics {[m.name for m in spec.metrics]}")
+    k310 = sw.load_sweep("sweep_k310_cycles")
+    p = [sw._k_metric(k310.scene_for(v.values), "p", []) for v in k310.variants()]
+    pstar = sw._k_metric(k310.scene_for(k310.variants()[0].values), "p_star", [])
+    assert min(map(abs, p)) < pstar < max(map(abs, p))  # the grid crosses the (3.10) boundary
+    k37 = sw.load_sweep("sweep_k37_equilibria")
+    s = [sw._k_metric(k37.scene_for(v.values), "s", []) for v in k37.variants()]
+    assert min(map(abs, s)) < 1 < max(map(abs, s))  # and the (3.7) boundary
+
+
+def test_cli(tmp_path, capsys):
+    assert sw.sweep_main(["sweep_psi_rate", "--dry-run"]) == 0
+    assert "sweep psi_rate: 76 variants, 0 invalid" in capsys.readouterr().out
+    for argv, msg in ((["nutation_oblate", "--vary", "controller.period=1:2"], "START:STOP:N"),
+                      (["nutation_oblate", "--metric", "final(nope)"], "unknown quantity"),
+                      (["nutation_oblate", "--random", "initial.theta=uniform(0,1)"], "samples"),
+                      (["no_such_scene"], "no such file"),
+                      (["nutation_oblate", "--batch", "0"], "--batch")):
+        assert sw.sweep_main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and msg in err and err.count("\n") == 1, err
+    out = tmp_path / "cli.parquet"
+    argv = ["nutation_oblate", "--vary", "controller.period=0.001,0.002", "--vary", "initial.theta=0.1,4",
+            "--set", "duration=0.02", "--metric", "th=final(theta_deg)", "--workers", "0", "--out", str(out), "--quiet"]
+    assert sw.sweep_main(argv) == 0
+    text = capsys.readouterr().out
+    assert "4 variants (2 run now, 0 from" in text and "2 invalid" in text and out.is_file()
+    assert out.with_suffix(".png").is_file()
+    assert sw.sweep_main(argv) == 0
+    assert "(0 run now, 2 from" in capsys.readouterr().out
+    assert sw.sweep_main([str(out), "--no-plot"]) == 0
+    shown = capsys.readouterr().out
+    assert "initial.theta" in shown and "invalid" in shown
+    bad = ["nutation_oblate", "--vary", "initial.theta=3.5,4", "--set", "duration=0.02", "--workers", "0", "--out",
+           str(tmp_path / "bad.parquet"), "--quiet", "--no-plot"]
+    assert sw.sweep_main(bad) == 1  # every variant invalid: recorded, status 1
+
+
+def test_core_needs_no_dask(tmp_path):
+    """The spec, variants, metrics and in-process runs import neither dask, distributed, tqdm nor pyarrow."""
+    code = f"""
+import sys
+class Block:
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in ('dask', 'distributed', 'tqdm', 'pyarrow'):
+            raise ImportError('blocked ' + name)
+sys.meta_path.insert(0, Block())
+from gyro_sim import sweep as sw
+spec = sw.spec_from_dict({{'scene': 'nutation_oblate', 'set': {TINY!r}, 'vary': {{'controller.period': '0.001,0.002'}}}})
+res = sw.run_sweep(spec, workers=0, progress=True)
+assert [r['status'] for r in res.rows] == ['ok', 'ok'], res.rows
+try:
+    sw.run_sweep(spec, workers=1)
+except sw.SweepError as e:
+    print('refused:', e)
+print('no dask:', not any(m.split('.')[0] in ('dask', 'distributed') for m in sys.modules))
+"""
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "refused: running on Dask needs the sweep extra" in p.stdout and "no dask: True" in p.stdout
+
+
+# ------------------------------------------------------------------------------------------
+# Dask: a local cluster, and a scheduler + workers as separate processes
+# ------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def reference():
+    """The tiny sweep in this process (no Dask) and on a local cluster of 2 worker processes."""
+    spec = tiny(vary={"controller.period": "0.001:0.006:6"}, random={"initial.psi": "uniform(0, 6.28)"}, samples=2)
+    serial = sw.run_sweep(spec, workers=0, progress=False)
+    t0 = time.perf_counter()
+    local = sw.run_sweep(spec, workers=2, progress=False)
+    print(f"\n  local cluster: start {local.startup:.2f} s, {local.n_run} runs in {local.wall:.2f} s "
+          f"(total {time.perf_counter() - t0:.2f} s), {local.mode}")
+    return spec, serial, local
+
+
+def test_local_cluster_gives_the_in_process_numbers(reference):
+    spec, serial, local = reference
+    assert local.mode.startswith("local cluster (2 worker") and local.n_failed == 0
+    assert metric_table(local) == metric_table(serial)
+    workers = {r["worker"] for r in local.rows}
+    assert all(w.startswith("tcp://127.0.0.1:") for w in workers) and len(workers) == 2
+
+
+def test_batched_path_gives_the_same_numbers(reference):
+    spec, serial, _ = reference
+    batched = sw.run_sweep(spec, workers=2, batch=5, progress=False)
+    assert metric_table(batched) == metric_table(serial)
+
+
+@pytest.fixture
+def dask_processes(tmp_path):
+    """A ``dask scheduler`` and ``dask worker --nworkers 2`` as separate processes, on 127.0.0.1 only; every
+    process group is ended (TERM, then KILL) whatever the test does."""
+    sched_file = tmp_path / "scheduler.json"
+    procs = []
+
+    def start(args, name):
+        log = open(tmp_path / f"{name}.log", "w")
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", *args], stdout=log, stderr=subprocess.STDOUT,
+                                      stdin=subprocess.DEVNULL, start_new_session=True, cwd=tmp_path))
+        log.close()
+
+    try:
+        start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file",
+               str(sched_file), "--idle-timeout", "300s"], "scheduler")
+        deadline = time.monotonic() + 60
+        while not sched_file.is_file() and time.monotonic() < deadline:
+            assert procs[0].poll() is None, (tmp_path / "scheduler.log").read_text()
+            time.sleep(0.1)
+        assert sched_file.is_file(), (tmp_path / "scheduler.log").read_text()
+        start(["worker", "--scheduler-file", str(sched_file), "--host", "127.0.0.1", "--nworkers", "2",
+               "--nthreads", "1", "--no-dashboard", "--local-directory", str(tmp_path / "work"),
+               "--death-timeout", "60"], "workers")
+        yield sched_file, procs
+    finally:
+        for p in reversed(procs):
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                pass
+            try:
+                os.killpg(p.pid, signal.SIGKILL)  # anything left in the group (nanny's workers)
+            except ProcessLookupError:
+                pass
+            p.wait()
+
+
+def test_scheduler_processes_give_the_local_numbers(reference, dask_processes):
+    spec, serial, local = reference
+    sched_file, procs = dask_processes
+    address = json.loads(sched_file.read_text())["address"]
+    assert address.startswith("tcp://127.0.0.1:")
+    t0 = time.perf_counter()
+    remote = sw.run_sweep(spec, scheduler=address, progress=False)
+    print(f"\n  {remote.mode}: {remote.workers} workers, {remote.n_run} runs in {remote.wall:.2f} s "
+          f"(connect {remote.startup:.2f} s, total {time.perf_counter() - t0:.2f} s)")
+    assert remote.mode == f"scheduler {address}" and remote.n_failed == 0
+    assert metric_table(remote) == metric_table(local) == metric_table(serial)
+    workers = {r["worker"].rsplit("/pid", 1)[0] for r in remote.rows}
+    assert workers and all(w.startswith("tcp://127.0.0.1:") for w in workers)
+    assert not workers & {r["worker"].rsplit("/pid", 1)[0] for r in local.rows}  # not the local cluster's
+    pids = {int(r["worker"].rsplit("/pid", 1)[1]) for r in remote.rows}
+    assert os.getpid() not in pids
+    # the scheduler file works as the address too
+    again = sw.run_sweep(spec, scheduler=str(sched_file), progress=False)
+    assert metric_table(again) == metric_table(local)
+
+
+def test_measure_reports_the_figures(capsys):
+    spec = tiny(vary={"controller.period": "0.001:0.002:24"}, metrics={"th": "final(theta_deg)"})
+    out = sw.measure(spec, workers=2, noop_tasks=100)
+    text = capsys.readouterr().out
+    with capsys.disabled():
+        print("\n" + text)
+    assert out["workers"] == 2 and out["runs"] == 24 and out["batch"] == 3
+    for k in ("one_worker", "all_workers", "batched"):
+        assert out[k]["runs_per_s"] > 0 and out[k]["failed"] == 0
+    assert 0 < out["scaling_efficiency"] < 1.5 and out["batched_speedup"] > 0 and out["noop_per_task"] > 0
+    assert "efficiency" in text and "batched speed-up" in text
