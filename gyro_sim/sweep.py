@@ -1394,11 +1394,9 @@ def _print_table(rows: list, spec_meta: dict, stream, limit: int = 60) -> None:
 
 
 def _write(stream, text: str) -> None:
-    try:
-        stream.write(text)
-    except UnicodeEncodeError:
-        enc = getattr(stream, "encoding", None) or "ascii"
-        stream.write(text.encode(enc, "replace").decode(enc))
+    from .cli import _write as write  # one encoding-safe writer for every command
+
+    write(stream, text)
 
 
 def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
