@@ -96,15 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
     phase.add_argument("--out", metavar="PNG", type=Path, default=None, help="default: runs/<scene>_phase.png")
     phase.set_defaults(func=_cmd_phase)
 
-    bench = sub.add_parser("bench", help="work-precision benchmark", add_help=False,
-                           description="Run the benchmark (see docs/benchmark.md); options after 'bench' go to it.")
-    bench.add_argument("rest", nargs=argparse.REMAINDER)
-    bench.set_defaults(func=_cmd_bench)
+    # listed here for `gyro-sim --help`; main() hands their arguments to bench_main / sweep_main
+    sub.add_parser("bench", help="work-precision benchmark (gyro-sim bench --help)", add_help=False)
 
-    sweep = sub.add_parser("sweep", help="parameter sweeps and Monte Carlo (Dask)", add_help=False,
-                           description="Run the sweep tool (see docs/sweeps.md); options after 'sweep' go to it.")
-    sweep.add_argument("rest", nargs=argparse.REMAINDER)
-    sweep.set_defaults(func=_cmd_sweep)
+    sub.add_parser("sweep", help="parameter sweeps and Monte Carlo on Dask (gyro-sim sweep --help)", add_help=False)
 
     scenes = sub.add_parser(
         "scenes",
@@ -372,19 +367,6 @@ def _cmd_phase(args) -> int:
     plot_phase(res, png, scene)
     _write(sys.stdout, f"phase portrait: {png}\n")
     return EXIT_OK
-
-
-def _cmd_bench(args) -> int:
-    from gyro_sim.bench import bench_main
-
-    rest = [a for a in args.rest if a != "--"]
-    return bench_main(rest)
-
-
-def _cmd_sweep(args) -> int:
-    from gyro_sim.sweep import sweep_main
-
-    return sweep_main([a for a in args.rest if a != "--"])
 
 
 def _cmd_scenes(args) -> int:

@@ -21,11 +21,12 @@ torque model the curves are drawn but marked as indicative only.
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 from typing import Optional
 
 import numpy as np
+
+from .plotting import save_png
 
 __all__ = ["plot_phase", "portrait_model", "MAX_POINTS"]
 
@@ -293,8 +294,4 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
         axL.legend(loc="lower left", fontsize=8, framealpha=0.85)
     fig.suptitle(title, fontsize=10)
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, format="png", dpi=100)
-    os.replace(tmp, path)
-    return path
+    return save_png(fig, path)

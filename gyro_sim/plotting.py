@@ -75,6 +75,16 @@ def _time_axis(t_end: float):
     return 1.0, "s"
 
 
+def save_png(fig, path) -> Path:
+    """Write a figure as PNG atomically (a temporary file, then a rename): no half-written plot."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    fig.savefig(tmp, format="png", dpi=100)
+    os.replace(tmp, path)
+    return path
+
+
 def plot_run(result, path) -> Path:
     """Write a PNG summarising ``result`` (a ``gyro_sim.simulate.RunResult``).
 
@@ -143,8 +153,4 @@ def plot_run(result, path) -> Path:
     for ax in axes:
         ax.grid(True, alpha=0.3)
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, format="png", dpi=100)
-    os.replace(tmp, path)
-    return path
+    return save_png(fig, path)
