@@ -639,7 +639,7 @@ def profile_kernels(res: Results) -> None:
         y = sim.y.copy()
         F = np.zeros(y.size)
         work = np.zeros(25)
-        args = (y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.tau.size, F, work)
+        args = (y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.tau.size, F, work, sim.eff)
         label = name + (f" modes={extra['modes']}" if extra else "")
         loop_rhs(10, *args)
         loop_field(10, Bre, Bim, om, work[0:3], work[3:6])
@@ -654,7 +654,7 @@ def profile_kernels(res: Results) -> None:
         def integ():
             yy = sim.y.copy()
             return kernels.integrate_etd(yy, 0.0, 0.0, stops, rec, h, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w,
-                                         sim.tail, sim.lam, oy, oN, 0)
+                                         sim.tail, sim.lam, oy, oN, 0, sim.eff)
 
         integ()
         t_step = min(_once(integ) for _ in range(3)) / k
@@ -691,10 +691,10 @@ def _profile_loops():
         nonlinear_part, field_case = kernels.nonlinear_part, kernels.field_case
 
         @njit(cache=False)
-        def loop_rhs(n, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
+        def loop_rhs(n, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
             acc = 0.0
             for i in range(n):
-                nonlinear_part(1e-7 * i, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work)
+                nonlinear_part(1e-7 * i, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
                 acc += F[0]
             return acc
 

@@ -33,6 +33,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .effects import DMP, MAG, NE, ON, T0, body_rate, damper_derivs, magnetizable_moment, torque_body
+
 # ----------------------------------------------------------------------------------------
 # small vector/quaternion helpers
 
@@ -103,70 +105,118 @@ def _rotl(w, x, y, z, vx, vy, vz):
 
 
 @njit(cache=True)
-def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
+def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
     """F = right-hand side of the state without the linear mode decay −e_n/τ_n.
 
     F[0:3] = N (case, N·m) = (R m_b) × B  with m_b = c (Σ w_n e_n − T_tail dB_b/dt)   [physics.md §3]
     F[3:7] = ½ q ⊗ (0, Ω_b),  Ω_b = J⁻¹ Rᵀ L
     F[7+3n+j] = −(dB_b/dt)_j,  dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
-    ``work`` (length ≥ 25) receives L_b in work[12:15]. Written on scalars: array views in the hot
-    path cost about 3× (measured by the benchmark).
+    ``eff`` (:mod:`gyro_sim.effects`): with eff[ON] ≠ 0 the effects change Ω_b, add torques, replace
+    m_b by the magnetizable body's and give the damper's states F[7+3nm:]. ``work`` (length ≥ 25)
+    receives Ω_b in work[12:15]. Written on scalars: array views in the hot path cost about 3×
+    (measured by the benchmark).
     """
+    has_eff = eff[ON] != 0.0
+    mag = has_eff and eff[MAG] != 0.0
     # field and its rate (case frame)
     Bx = By = Bz = 0.0
     dBx = dBy = dBz = 0.0
+    ddx = ddy = ddz = 0.0
     for p in range(om.shape[0]):
         c = math.cos(om[p] * s)
         sn = math.sin(om[p] * s)
-        Bx += Bre[p, 0] * c + Bim[p, 0] * sn
-        By += Bre[p, 1] * c + Bim[p, 1] * sn
-        Bz += Bre[p, 2] * c + Bim[p, 2] * sn
+        bx = Bre[p, 0] * c + Bim[p, 0] * sn
+        by = Bre[p, 1] * c + Bim[p, 1] * sn
+        bz = Bre[p, 2] * c + Bim[p, 2] * sn
+        Bx += bx
+        By += by
+        Bz += bz
         dBx += om[p] * (Bim[p, 0] * c - Bre[p, 0] * sn)
         dBy += om[p] * (Bim[p, 1] * c - Bre[p, 1] * sn)
         dBz += om[p] * (Bim[p, 2] * c - Bre[p, 2] * sn)
+        if mag:
+            o2 = om[p] * om[p]
+            ddx -= o2 * bx
+            ddy -= o2 * by
+            ddz -= o2 * bz
     # stage quaternions are not unit: the attitude is that of q/|q|; Rᵀ is the conjugate's rotation
     q0, q1, q2, q3 = y[3], y[4], y[5], y[6]
     inv_n = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     w0, x0, y0, z0 = q0 * inv_n, q1 * inv_n, q2 * inv_n, q3 * inv_n
     Lbx, Lby, Lbz = _rotl(w0, -x0, -y0, -z0, y[0], y[1], y[2])
-    work[12] = Lbx
-    work[13] = Lby
-    work[14] = Lbz
-    Ox = Jinv[0] * Lbx
-    Oy = Jinv[1] * Lby
-    Oz = Jinv[2] * Lbz
+    k0 = 7 + 3 * nm
+    t_abs = s
+    if has_eff:
+        t_abs = eff[T0] + s
+        Ox, Oy, Oz = body_rate(t_abs, Lbx, Lby, Lbz, y, k0, Jinv, eff)
+    else:
+        Ox = Jinv[0] * Lbx
+        Oy = Jinv[1] * Lby
+        Oz = Jinv[2] * Lbz
+    work[12] = Ox
+    work[13] = Oy
+    work[14] = Oz
     # quaternion kinematics dq/dt = ½ q ⊗ (0, Ω_b) of the stage quaternion itself
     F[3] = -0.5 * (q1 * Ox + q2 * Oy + q3 * Oz)
     F[4] = 0.5 * (q0 * Ox + q2 * Oz - q3 * Oy)
     F[5] = 0.5 * (q0 * Oy + q3 * Ox - q1 * Oz)
     F[6] = 0.5 * (q0 * Oz + q1 * Oy - q2 * Ox)
-    if c_m == 0.0:
-        F[0] = F[1] = F[2] = 0.0
-        for i in range(7, F.shape[0]):
-            F[i] = 0.0
-        return
-    Bbx, Bby, Bbz = _rotl(w0, -x0, -y0, -z0, Bx, By, Bz)
-    dbx, dby, dbz = _rotl(w0, -x0, -y0, -z0, dBx, dBy, dBz)
-    # dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
-    dbx -= Oy * Bbz - Oz * Bby
-    dby -= Oz * Bbx - Ox * Bbz
-    dbz -= Ox * Bby - Oy * Bbx
-    mx = -tail * dbx
-    my = -tail * dby
-    mz = -tail * dbz
-    for n in range(nm):
-        k = 7 + 3 * n
-        mx += w[n] * y[k]
-        my += w[n] * y[k + 1]
-        mz += w[n] * y[k + 2]
-        F[k] = -dbx
-        F[k + 1] = -dby
-        F[k + 2] = -dbz
-    mcx, mcy, mcz = _rotl(w0, x0, y0, z0, c_m * mx, c_m * my, c_m * mz)
-    # N = m × B (case frame)
-    F[0] = mcy * Bz - mcz * By
-    F[1] = mcz * Bx - mcx * Bz
-    F[2] = mcx * By - mcy * Bx
+    F[0] = F[1] = F[2] = 0.0
+    for i in range(7, F.shape[0]):
+        F[i] = 0.0
+    if c_m != 0.0 or mag:
+        Bbx, Bby, Bbz = _rotl(w0, -x0, -y0, -z0, Bx, By, Bz)
+        dbx, dby, dbz = _rotl(w0, -x0, -y0, -z0, dBx, dBy, dBz)
+        if mag:
+            # B̈_b = Rᵀ B̈ − 2 Ω × (Rᵀ Ḃ) + Ω × (Ω × B_b) − Ω̇ × B_b, Ω̇ from the M and P1 torque ([BS]: to
+            # the order of the expansion the P2 term's own torque is not needed in Ω̇)
+            ax, ay, az = _rotl(w0, -x0, -y0, -z0, ddx, ddy, ddz)
+            wbx, wby, wbz = Oy * Bbz - Oz * Bby, Oz * Bbx - Ox * Bbz, Ox * Bby - Oy * Bbx
+            ax += -2.0 * (Oy * dbz - Oz * dby) + (Oy * wbz - Oz * wby)
+            ay += -2.0 * (Oz * dbx - Ox * dbz) + (Oz * wbx - Ox * wbz)
+            az += -2.0 * (Ox * dby - Oy * dbx) + (Ox * wby - Oy * wbx)
+        # dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
+        dbx -= Oy * Bbz - Oz * Bby
+        dby -= Oz * Bbx - Ox * Bbz
+        dbz -= Ox * Bby - Oy * Bbx
+        if mag:
+            m1x, m1y, m1z = magnetizable_moment(eff, Bbx, Bby, Bbz, dbx, dby, dbz, 0.0, 0.0, 0.0)
+            gx = (m1y * Bbz - m1z * Bby) - (Oy * Lbz - Oz * Lby)
+            gy = (m1z * Bbx - m1x * Bbz) - (Oz * Lbx - Ox * Lbz)
+            gz = (m1x * Bby - m1y * Bbx) - (Ox * Lby - Oy * Lbx)
+            dOx, dOy, dOz = Jinv[0] * gx, Jinv[1] * gy, Jinv[2] * gz
+            ax -= dOy * Bbz - dOz * Bby
+            ay -= dOz * Bbx - dOx * Bbz
+            az -= dOx * Bby - dOy * Bbx
+            mx, my, mz = magnetizable_moment(eff, Bbx, Bby, Bbz, dbx, dby, dbz, ax, ay, az)
+            mcx, mcy, mcz = _rotl(w0, x0, y0, z0, mx, my, mz)
+        else:
+            mx = -tail * dbx
+            my = -tail * dby
+            mz = -tail * dbz
+            for n in range(nm):
+                k = 7 + 3 * n
+                mx += w[n] * y[k]
+                my += w[n] * y[k + 1]
+                mz += w[n] * y[k + 2]
+                F[k] = -dbx
+                F[k + 1] = -dby
+                F[k + 2] = -dbz
+            mcx, mcy, mcz = _rotl(w0, x0, y0, z0, c_m * mx, c_m * my, c_m * mz)
+        # N = m × B (case frame)
+        F[0] = mcy * Bz - mcz * By
+        F[1] = mcz * Bx - mcx * Bz
+        F[2] = mcx * By - mcy * Bx
+    if has_eff:
+        x3x, x3y, x3z = _rotl(w0, x0, y0, z0, 0.0, 0.0, 1.0)
+        nbx, nby, nbz, ncx, ncy, ncz = torque_body(t_abs, Ox, Oy, Oz, x3x, x3y, x3z, eff)
+        tx, ty, tz = _rotl(w0, x0, y0, z0, nbx, nby, nbz)
+        F[0] += tx + ncx
+        F[1] += ty + ncy
+        F[2] += tz + ncz
+        if eff[DMP] != 0.0:
+            Nbx, Nby, Nbz = _rotl(w0, -x0, -y0, -z0, F[0], F[1], F[2])
+            damper_derivs(t_abs, y, k0, Jinv, eff, Lbx, Lby, Lbz, Ox, Oy, Oz, Nbx, Nby, Nbz, F)
 
 
 # ----------------------------------------------------------------------------------------
@@ -242,7 +292,7 @@ def _q_exp(q, u0, u1, u2, out):
 
 
 @njit(cache=True)
-def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work, K):
+def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work, K, eff):
     """One step of ETDRK4 with the attitude advanced on the rotation group (RKMK4, in place on y).
 
     L and the eddy modes take the Cox–Matthews ETDRK4 step; the quaternion is q_n ⊗ exp(u) with u
@@ -260,27 +310,27 @@ def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2
     cc = buf[6]
     # K[0:12]: the stage increments K1..K4 (rad/s); K[12:16] scratch
     q0 = y[3:7]
-    nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work)
-    K[0] = Jinv[0] * work[12]
-    K[1] = Jinv[1] * work[13]
-    K[2] = Jinv[2] * work[14]
+    nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work, eff)
+    K[0] = work[12]
+    K[1] = work[13]
+    K[2] = work[14]
     for i in range(n):
         a[i] = E2[i] * y[i] + Q[i] * Nu[i]
     _q_exp(q0, 0.5 * h * K[0], 0.5 * h * K[1], 0.5 * h * K[2], a[3:7])
-    nonlinear_part(s + 0.5 * h, a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work)
+    nonlinear_part(s + 0.5 * h, a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work, eff)
     _dexpinv(0.5 * h * K[0], 0.5 * h * K[1], 0.5 * h * K[2],
-             Jinv[0] * work[12], Jinv[1] * work[13], Jinv[2] * work[14], K[3:6])
+             work[12], work[13], work[14], K[3:6])
     for i in range(n):
         b[i] = E2[i] * y[i] + Q[i] * Na[i]
     _q_exp(q0, 0.5 * h * K[3], 0.5 * h * K[4], 0.5 * h * K[5], b[3:7])
-    nonlinear_part(s + 0.5 * h, b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work)
+    nonlinear_part(s + 0.5 * h, b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work, eff)
     _dexpinv(0.5 * h * K[3], 0.5 * h * K[4], 0.5 * h * K[5],
-             Jinv[0] * work[12], Jinv[1] * work[13], Jinv[2] * work[14], K[6:9])
+             work[12], work[13], work[14], K[6:9])
     for i in range(n):
         cc[i] = E2[i] * a[i] + Q[i] * (2.0 * Nb[i] - Nu[i])
     _q_exp(q0, h * K[6], h * K[7], h * K[8], cc[3:7])
-    nonlinear_part(s + h, cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work)
-    _dexpinv(h * K[6], h * K[7], h * K[8], Jinv[0] * work[12], Jinv[1] * work[13], Jinv[2] * work[14], K[9:12])
+    nonlinear_part(s + h, cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work, eff)
+    _dexpinv(h * K[6], h * K[7], h * K[8], work[12], work[13], work[14], K[9:12])
     u0 = h / 6.0 * (K[0] + 2.0 * K[3] + 2.0 * K[6] + K[9])
     u1 = h / 6.0 * (K[1] + 2.0 * K[4] + 2.0 * K[7] + K[10])
     u2 = h / 6.0 * (K[2] + 2.0 * K[5] + 2.0 * K[8] + K[11])
@@ -304,7 +354,7 @@ def _equal_steps(span, h_max):
 
 @njit(cache=True)
 def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
-                  out_y, out_N, k_out):
+                  out_y, out_N, k_out, eff):
     """Integrate y from t0 through each time in ``t_stops`` (increasing) with ETDRK4.
 
     Each interval between stops is split into equal steps no longer than ``h_max``. Where
@@ -312,7 +362,8 @@ def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m,
     ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns (k_out, steps).
     """
     n = y.shape[0]
-    nm = (n - 7) // 3
+    nm = (n - 7 - int(eff[NE])) // 3
+    eff[T0] = t_seg
     buf = np.empty((7, n))
     work = np.empty(25)
     K = np.empty(16)
@@ -334,12 +385,12 @@ def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m,
                 h_last = h
             for j in range(k):
                 etd_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
-                             E, E2, Q, A1, A2, A3, buf, work, K)
+                             E, E2, Q, A1, A2, A3, buf, work, K, eff)
             steps += k
             t = t_stops[i]
         if record[i]:
             out_y[k_out, :] = y
-            nonlinear_part(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, buf[0], work)
+            nonlinear_part(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, buf[0], work, eff)
             out_N[k_out, 0] = buf[0, 0]
             out_N[k_out, 1] = buf[0, 1]
             out_N[k_out, 2] = buf[0, 2]

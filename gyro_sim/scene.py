@@ -46,6 +46,8 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       params: {nu: 300.0, control_current: 1.0, spin_current: 1.0, spin_rate: 3000.0}
 
     fidelity: full                   # full | averaged | auto (gyro_sim/fidelity.py)
+    effects: {}                      # unbalance, gas_drag, magnetizable, flywheel, damper
+                                     # (gyro_sim/effect_config.py; all off by default)
 
 Fields are switched on at t = 0 on a rotor free of eddy currents.
 
@@ -63,6 +65,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from gyro_ctl.config import ControllerConfig
+
+from .effect_config import Effects
 
 __all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir"]
 
@@ -200,6 +204,7 @@ class Scene(_Strict):
     integrator: Integrator = Integrator()
     controller: Optional[ControllerConfig] = None
     fidelity: Literal["full", "averaged", "auto"] = "full"
+    effects: Effects = Effects()
     source: Optional[str] = None
 
     @model_validator(mode="after")

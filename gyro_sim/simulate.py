@@ -13,7 +13,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from . import kernels
+from . import effects, kernels
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
@@ -56,6 +56,7 @@ class RunResult:
     commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
     averaged_segments: list = field(default_factory=list)  # (t0, t1) s run with the averaged model
     averaged_rhs_evaluations: int = 0
+    effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
 
     @property
     def spin_rate(self) -> np.ndarray:
@@ -114,8 +115,16 @@ class Simulator:
                 tau = np.asarray(self.conductor.tau, dtype=float)
                 w = np.asarray(self.conductor.weight, dtype=float)
                 tail = float(self.conductor.tail_tau)
+        # --- effects (physics.md §4, [BS]); the magnetizable body replaces the eddy-mode model
+        self.eff = effects.pack_effects(scene, self.conductor)
+        self.n_extra = int(self.eff[effects.NE])
+        if scene.effects.magnetizable is not None:
+            tau, w, tail, c_m = np.zeros(0), np.zeros(0), 0.0, 0.0
+            if scene.torque_model == "none":
+                self.eff[effects.MAG] = 0.0
         self.tau, self.w, self.tail, self.c_m = tau, w, tail, c_m
-        self.lam = np.concatenate([np.zeros(7), np.repeat(-1.0 / tau, 3) if tau.size else np.zeros(0)])
+        self.lam = np.concatenate([np.zeros(7), np.repeat(-1.0 / tau, 3) if tau.size else np.zeros(0),
+                                   np.zeros(self.n_extra)])
         # --- stators
         st = scene.stators
         self.stator_names = [s.name for s in st]
@@ -134,9 +143,13 @@ class Simulator:
         d = np.asarray(ini.L_direction, dtype=float)
         d /= np.linalg.norm(d)
         Lmag = ini.kinetic_moment if ini.kinetic_moment is not None else J[2] * (ini.spin or 0.0)
-        self.y = np.zeros(7 + 3 * tau.size)
+        self.y = np.zeros(7 + 3 * tau.size + self.n_extra)
         self.y[0:3] = Lmag * d
         self.y[3:7] = attitude_from_euler(d, ini.psi, ini.theta, ini.phi)
+        if scene.effects.damper is not None:
+            k0 = 7 + 3 * tau.size
+            self.y[k0:k0 + 3] = scene.effects.damper.offset
+            self.y[k0 + 3:k0 + 6] = scene.effects.damper.velocity
         self.t = 0.0
         # the fields are switched on at t = 0 on a rotor free of eddy currents
         self._field_step(np.zeros(3), self.field_now())
@@ -186,7 +199,7 @@ class Simulator:
         if self.tau.size == 0:
             return
         dBb = quat_to_matrix(self.y[3:7]).T @ (after - before)
-        self.y[7:] -= np.tile(dBb, self.tau.size)
+        self.y[7:7 + 3 * self.tau.size] -= np.tile(dBb, self.tau.size)
 
     def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T)."""
@@ -216,11 +229,26 @@ class Simulator:
                 rate = L * np.max(np.abs(self.Jinv - self._inv_ref))
                 h = 2 * math.pi / (spt * rate) if rate > 0 else math.inf
         else:
-            om = max(L * np.max(self.Jinv), self._nu_max, float(np.max(self.field_om, initial=0.0)))
+            om = max(L * np.max(self.Jinv), self._nu_max, float(np.max(self.field_om, initial=0.0)),
+                     self._effect_rate())
             h = 2 * math.pi / (spt * om) if om > 0 else math.inf
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
         return h
+
+    def _effect_rate(self) -> float:
+        """Fastest rate (rad/s) an effect brings: the body rate the flywheel drives, the damper's spring."""
+        if self.eff[effects.ON] == 0.0:
+            return 0.0
+        ef = self.scene.effects
+        rate = float(np.linalg.norm(self.body_rates(self.t, self.y)[0]))
+        if ef.flywheel is not None:
+            fw = ef.flywheel
+            rate += fw.inertia * max(abs(v) for v in fw.profile.speed) * float(np.linalg.norm(self.Jinv * fw.axis))
+        if ef.damper is not None:
+            d = ef.damper
+            rate = max(rate, math.sqrt(d.stiffness / d.mass), d.damping / d.mass)
+        return rate
 
     # --- time stepping -----------------------------------------------------------------------
     def advance(self, t_end: float, sample_times: Optional[np.ndarray] = None,
@@ -244,7 +272,8 @@ class Simulator:
                 stops = np.append(stops, t_end)
                 record = np.append(record, False)
         Bre, Bim, om = self.phasors()
-        free = om.size == 0 or self.c_m == 0.0  # no field, or no torque model: the geometric free stepper
+        # no field (or no torque model) and no effect: the geometric free stepper
+        free = (om.size == 0 or (self.c_m == 0.0 and self.eff[effects.MAG] == 0.0)) and self.eff[effects.ON] == 0.0
         h_max = self._max_step(free)
         if not math.isfinite(h_max):
             h_max = max(t_end - self.t, 1e-300)
@@ -255,7 +284,7 @@ class Simulator:
         else:
             k_out, steps = kernels.integrate_etd(
                 self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out)
+                self.tail, self.lam, out_y, out_N, k_out, self.eff)
         self.steps += steps
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
@@ -265,9 +294,41 @@ class Simulator:
         """Electrodynamic torque now (case frame, N·m)."""
         Bre, Bim, om = self.phasors()
         F = np.zeros(self.y.size)
+        self.eff[effects.T0] = self.t
         kernels.nonlinear_part(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail,
-                               self.tau.size, F, np.zeros(25))
+                               self.tau.size, F, np.zeros(25), self.eff)
         return F[0:3].copy()
+
+    def effect_outputs(self, t: np.ndarray, Y: np.ndarray) -> dict:
+        """Outputs of the effects that are on, for states ``Y`` (rows) at times ``t`` (s), SI:
+
+        ``flywheel_speed`` Ω_f (rad/s), ``flywheel_angle`` ∫Ω_f dt (rad); ``damper_offset`` u and
+        ``damper_velocity`` u̇ (body frame, m, m/s); ``vertical_angle`` Θ between x3 and the unbalance's
+        vertical (rad).
+        """
+        ef, out = self.scene.effects, {}
+        t = np.asarray(t, float)
+        if ef.flywheel is not None:
+            out["flywheel_speed"] = np.array([effects.flywheel_speed(float(x), self.eff)[0] for x in t])
+            out["flywheel_angle"] = effects.flywheel_angle(t, self.eff)
+        if ef.damper is not None:
+            k0 = 7 + 3 * self.tau.size
+            out["damper_offset"] = Y[:, k0:k0 + 3].copy()
+            out["damper_velocity"] = Y[:, k0 + 3:k0 + 6].copy()
+        if ef.unbalance is not None:
+            x3 = quat_to_matrix(Y[:, 3:7])[:, :, 2]
+            out["vertical_angle"] = np.arccos(np.clip(x3 @ np.asarray(ef.unbalance.vertical), -1.0, 1.0))
+        return out
+
+    def body_rates(self, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """Ω_b (rad/s, body frame) of states ``Y`` (rows) at times ``t`` (s), effects included."""
+        Y = np.atleast_2d(Y)
+        if self.eff[effects.ON] == 0.0:
+            return body_rates(self.J, Y[:, 0:3], Y[:, 3:7])[1]
+        Lb, _ = body_rates(self.J, Y[:, 0:3], Y[:, 3:7])
+        k0 = 7 + 3 * self.tau.size
+        return np.array([effects.body_rate(float(ti), *Lb[i], Y[i], k0, self.Jinv, self.eff)
+                         for i, ti in enumerate(np.broadcast_to(t, (Y.shape[0],)))])
 
 
 def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -316,7 +377,9 @@ class Runner:
         # every controller tick is an output sample too: the controller (node) sees the published state
         self.t_out = t_out = np.union1d(t_out, ticks)
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
-        self.breaks = sorted(set(t_out.tolist()) | {c.time for c in self._cmds} | self._ticks | {T})
+        fly = scene.effects.flywheel  # the kinks of its speed profile are breaks: steps never straddle one
+        knots = {t for t in fly.profile.time if 0 < t < T} if fly is not None else set()
+        self.breaks = sorted(set(t_out.tolist()) | {c.time for c in self._cmds} | self._ticks | {T} | knots)
         n = t_out.size
         k = len(self.sim.stator_names)
         self.out_y = np.empty((n, self.sim.y.size))
@@ -366,7 +429,7 @@ class Runner:
 
         sim = self.sim
         L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
-        _, omega_b = body_rates(sim.J, L, q)
+        omega_b = sim.body_rates(sim.t, sim.y)[0] if sim.eff[effects.ON] else body_rates(sim.J, L, q)[1]
         if not hasattr(self, "_axes"):
             self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
         return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
@@ -461,16 +524,23 @@ class Runner:
         """Output rows as arrays: t, L, q, omega_b, euler, torque, energy, current, rate, phase."""
         L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
         omega_b, eul, energy = derived_outputs(self.sim.J, L, q)
+        extra = {}
+        if self.sim.eff[effects.ON]:
+            t = self.t_out[rows]
+            omega_b = self.sim.body_rates(t, self.out_y[rows])
+            energy = 0.5 * np.einsum("ni,i,ni->n", omega_b, self.sim.J, omega_b)  # the rigid body's own
+            extra = self.sim.effect_outputs(t, self.out_y[rows])
         return {"t": self.t_out[rows], "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
-                "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows]}
+                "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
+                "effects": extra}
 
     def result(self) -> RunResult:
         s = self.samples(slice(0, self.row))
         return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"], euler=s["euler"],
                          torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
                          current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
-                         modes=self.out_y[: self.row, 7:], wall_time=self.wall_time, steps=self.sim.steps,
-                         commands=list(self.command_log))
+                         modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
+                         steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"])
 
 
 def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunResult:

@@ -48,7 +48,7 @@ def test_numpy_rhs_equals_compiled_kernel(name, overrides):
         y[7:] = rng.normal(size=n - 7) * 2e-3
         t = sim.t + rng.uniform(0.0, 0.05)
         F = np.zeros(n)
-        kernels.nonlinear_part(t - sim.t, y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, nm, F, np.zeros(25))
+        kernels.nonlinear_part(t - sim.t, y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, nm, F, np.zeros(25), sim.eff)
         F += sim.lam * y
         G = f(t, y)
         assert G.shape == F.shape

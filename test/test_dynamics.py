@@ -45,7 +45,7 @@ def test_K13_mean_torque_from_instantaneous_torque():
     acc = np.zeros(3)
     for j in range(n):  # uniform samples of a periodic function: the mean is exact
         kernels.nonlinear_part(2 * math.pi / abs(nu) * j / n, sim.y, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w,
-                               sim.tail, 0, F, np.zeros(25))
+                               sim.tail, 0, F, np.zeros(25), sim.eff)
         acc += F[0:3]
     mean = acc / n
     from gyro_sim.frames import quat_to_matrix

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import gyro_sim
+from gyro_sim import effects
 from gyro_sim.averaged import (K21Model, PsiSwitchingK, RotorK, StatorsK, k_e_of_scene, nutation_k22,
                                nutation_k22_rate, psi_switching_averaged, time_to_theta, transverse_decay_k32)
 
@@ -352,7 +353,7 @@ def test_switched_drive_average_from_the_instantaneous_torque():
                 y[3] = 1.0  # body at rest (Ω = 0): only the drive
                 F = np.zeros(7)
                 kernels.nonlinear_part(0.0, y, Bre, Bim, np.array([nu]), np.ones(3), c_m, np.zeros(0), 1.0, 0, F,
-                                       np.zeros(25))
+                                       np.zeros(25), np.zeros(effects.TAB))
                 proj.append(F[0:3] @ ep)
                 vec.append(F[0:3].copy())
             c = c_m  # k_e with moment scale 1 and τ_eff 1, B = 1
