@@ -128,6 +128,9 @@ def averaged_region(runner: Runner) -> tuple[Optional[int], str]:
         return None, f"rotor.inertia = {list(J)}: the averaged model needs J1 = J2"
     if scene.field:
         return None, "a general field is present"
+    if scene.effects.any:
+        on = [k for k in type(scene.effects).model_fields if getattr(scene.effects, k) is not None]
+        return None, f"effects {on} are on; the averaged model has none of them"
     on = [k for k in range(len(sim.stator_names)) if sim.current[k] > 0]
     if len(on) != 1:
         return None, f"{len(on)} stators on; the averaged model takes exactly one"

@@ -27,6 +27,11 @@ topic                      type                          frame_id        content
                                                                          velocity = signed field rate (rad/s),
                                                                          position = field phase (rad)
 ``/gyro/stator_commands``  sensor_msgs/msg/JointState    (none)          same meanings; position empty
+``/gyro/effects``          sensor_msgs/msg/JointState    (none)          state of the scene's internal bodies (only
+                                                                         when present): ``flywheel`` position =
+                                                                         ∫Ω_f dt (rad), velocity = Ω_f (rad/s);
+                                                                         ``damper_x|y|z`` position = u (m),
+                                                                         velocity = u̇ (m/s), body frame
 ``/gyro/status``           std_msgs/msg/String           —               watchdog / refusals / info text
 ``/gyro/scene``            std_msgs/msg/String           —               scene file text (latched)
 ``/clock``                 rosgraph_msgs/msg/Clock       —               simulation time
@@ -45,7 +50,7 @@ from typing import Any, Mapping, Optional, Sequence
 __all__ = [
     "NAMESPACE", "FRAME_ROTOR", "FRAME_CASE", "FRAME_L",
     "TOPIC_IMU", "TOPIC_KINETIC_MOMENT", "TOPIC_EULER", "TOPIC_TORQUE", "TOPIC_STATORS",
-    "TOPIC_STATOR_COMMANDS", "TOPIC_STATUS", "TOPIC_SCENE", "TOPIC_CLOCK",
+    "TOPIC_STATOR_COMMANDS", "TOPIC_EFFECTS", "effects_message", "TOPIC_STATUS", "TOPIC_SCENE", "TOPIC_CLOCK",
     "TOPICS", "FRAME_IDS", "QOS", "STATE_TOPICS",
     "stamp", "stamp_ns", "state_messages", "command_message", "status_message", "scene_message",
     "clock_message", "to_ros", "to_rosbags",
@@ -65,6 +70,7 @@ TOPIC_EULER = NAMESPACE + "/euler"
 TOPIC_TORQUE = NAMESPACE + "/torque"
 TOPIC_STATORS = NAMESPACE + "/stators"
 TOPIC_STATOR_COMMANDS = NAMESPACE + "/stator_commands"
+TOPIC_EFFECTS = NAMESPACE + "/effects"
 TOPIC_STATUS = NAMESPACE + "/status"
 TOPIC_SCENE = NAMESPACE + "/scene"
 TOPIC_CLOCK = "/clock"
@@ -77,6 +83,7 @@ TOPICS: dict[str, str] = {
     TOPIC_TORQUE: "geometry_msgs/msg/Vector3Stamped",
     TOPIC_STATORS: "sensor_msgs/msg/JointState",
     TOPIC_STATOR_COMMANDS: "sensor_msgs/msg/JointState",
+    TOPIC_EFFECTS: "sensor_msgs/msg/JointState",
     TOPIC_STATUS: "std_msgs/msg/String",
     TOPIC_SCENE: "std_msgs/msg/String",
     TOPIC_CLOCK: "rosgraph_msgs/msg/Clock",
@@ -90,6 +97,7 @@ FRAME_IDS: dict[str, str] = {
     TOPIC_TORQUE: FRAME_CASE,
     TOPIC_STATORS: "",
     TOPIC_STATOR_COMMANDS: "",
+    TOPIC_EFFECTS: "",
 }
 
 _DEFAULT_QOS = {"reliability": "reliable", "history": "keep_last", "depth": 100, "durability": "volatile"}
@@ -213,6 +221,28 @@ def state_messages(t: float, L: Any, q_wxyz: Any, omega_b: Any, euler: Any, torq
         TOPIC_TORQUE: _vector3_stamped(dict(time), FRAME_CASE, torque, "torque"),
         TOPIC_STATORS: _joint_state(dict(time), names, "stators", position=phase, velocity=rate, effort=current),
     }
+
+
+def effects_message(t: float, effects: Mapping[str, Any]) -> Optional[dict]:
+    """``/gyro/effects`` at time t from one sample of :meth:`gyro_sim.simulate.Simulator.effect_outputs`
+    (name → value), or None when no effect has a state to publish. Channels: ``flywheel`` (position =
+    ∫Ω_f dt rad, velocity = Ω_f rad/s), ``damper_x``, ``damper_y``, ``damper_z`` (position = u m,
+    velocity = u̇ m/s, body frame)."""
+    names: list[str] = []
+    pos: list[float] = []
+    vel: list[float] = []
+    if "flywheel_speed" in effects:
+        names.append("flywheel")
+        pos.append(float(effects["flywheel_angle"]))
+        vel.append(float(effects["flywheel_speed"]))
+    if "damper_offset" in effects:
+        u, v = _vec3(effects["damper_offset"], "damper_offset"), _vec3(effects["damper_velocity"], "damper_velocity")
+        names += ["damper_x", "damper_y", "damper_z"]
+        pos += u
+        vel += v
+    if not names:
+        return None
+    return _joint_state(_time(t), names, "effects", position=pos, velocity=vel)
 
 
 def command_message(t: float, names: Sequence[str], current: Optional[Any], rate: Optional[Any]) -> dict:

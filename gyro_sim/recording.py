@@ -44,8 +44,8 @@ import yaml
 
 from . import __version__
 from .messages import (
-    QOS, TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS,
-    TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, command_message, scene_message, stamp_ns,
+    QOS, TOPIC_CLOCK, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS,
+    TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, command_message, effects_message, scene_message, stamp_ns,
     state_messages, status_message, to_rosbags,
 )
 
@@ -265,10 +265,15 @@ class BagRecorder:
                 self.counts[topic] += 1
 
     def write_sample(self, t: float, L: Any, q: Any, omega_b: Any, euler: Any, torque: Any,
-                     names: Sequence[str], current: Any, rate: Any, phase: Any) -> None:
+                     names: Sequence[str], current: Any, rate: Any, phase: Any,
+                     effects: Optional[Mapping[str, Any]] = None) -> None:
         """One output sample at simulation time t (s): /clock, imu, kinetic_moment, euler, torque,
-        stators. q is (w, x, y, z), body → case; see :func:`gyro_sim.messages.state_messages`."""
+        stators (and /gyro/effects when ``effects`` has a state to publish). q is (w, x, y, z),
+        body → case; see :func:`gyro_sim.messages.state_messages`."""
         msgs = state_messages(t, L, q, omega_b, euler, torque, names, current, rate, phase)
+        eff = effects_message(t, effects) if effects else None
+        if eff is not None:
+            msgs[TOPIC_EFFECTS] = eff
         ns = stamp_ns(t)
         self._write(ns, [(topic, self._serialize(topic, f)) for topic, f in msgs.items()])
 
@@ -356,6 +361,7 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
     rows = (result.t.tolist(), result.L.tolist(), result.q.tolist(), result.omega_b.tolist(),
             result.euler.tolist(), result.torque.tolist(), result.current.tolist(),
             result.field_rate.tolist(), result.field_phase.tolist())
+    effects = getattr(result, "effects", None) or {}
     with BagRecorder(path, text, scene.name, extra=ext) as rec:
         gi = 0
         for i, (t, L, q, w, e, N, I, r, ph) in enumerate(zip(*rows)):
@@ -363,7 +369,7 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
             while gi < len(groups) and groups[gi][0] < t:
                 rec.write_command(*groups[gi])
                 gi += 1
-            rec.write_sample(t, L, q, w, e, N, names, I, r, ph)
+            rec.write_sample(t, L, q, w, e, N, names, I, r, ph, {k: v[i] for k, v in effects.items()})
         for g in groups[gi:]:
             rec.write_command(*g)
     return Path(path)
@@ -401,6 +407,7 @@ class BagData:
     scene_name: Optional[str]
     version: Optional[str]
     custom: dict = field(default_factory=dict)
+    effects: dict = field(default_factory=dict)  # /gyro/effects channel → (n, 2): position, velocity (SI)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -444,6 +451,7 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
     status: list[str] = []
     clock: list[int] = []
     scene_text = None
+    eff_msgs: list = []
     with Reader(path) as reader:
         custom = _custom_data(reader, path)
         conns = [c for c in reader.connections if c.topic in TOPICS and c.msgtype == TOPICS[c.topic]]
@@ -464,6 +472,8 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
                 a = acc[topic]
                 a[0].append(_ns(m.header.stamp))
                 a[1].append((list(m.name), m.effort, m.velocity, m.position))
+            elif topic == TOPIC_EFFECTS:
+                eff_msgs.append((_ns(m.header.stamp), list(m.name), m.position, m.velocity))
             elif topic == TOPIC_STATOR_COMMANDS:
                 cmd.append((_ns(m.header.stamp), list(m.name), m.effort, m.velocity))
             elif topic == TOPIC_STATUS:
@@ -511,6 +521,11 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
         for j, arr in enumerate((eff, vel)):
             if len(arr) == len(cols):
                 cc[j, i, cols] = arr
+    effects: dict[str, np.ndarray] = {}  # channel → (n, 2) position, velocity
+    for ns, nm, pos, vel in eff_msgs:
+        r = int(np.searchsorted(t_ns, ns))
+        for j, name in enumerate(nm):
+            effects.setdefault(name, np.full((n, 2), np.nan))[r] = (pos[j], vel[j])
     return BagData(
         t_ns=t_ns, t=t_ns / 1e9, L=aligned(TOPIC_KINETIC_MOMENT, 3), q=imu[:, 0:4], omega_b=imu[:, 4:7],
         euler=aligned(TOPIC_EULER, 3), torque=aligned(TOPIC_TORQUE, 3), stator_names=names,
@@ -519,7 +534,7 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
         status_t=np.asarray(status_t, dtype=np.int64) / 1e9, status=status,
         clock_t=np.asarray(clock, dtype=np.int64) / 1e9,
         scene_text=scene_text, scene_name=custom.get(CUSTOM_KEYS["scene_name"]),
-        version=custom.get(CUSTOM_KEYS["version"]), custom=custom,
+        version=custom.get(CUSTOM_KEYS["version"]), custom=custom, effects=effects,
     )
 
 

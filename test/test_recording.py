@@ -108,7 +108,7 @@ def test_mcap_is_ros2_profile_with_qos_and_statistics(recorded):
     # statistics: the right counts per channel
     counts = {ch.topic: stats.channel_message_counts.get(cid, 0) for cid, ch in channels.items()}
     expected = {t: n for t in STATE_TOPICS}
-    expected.update({"/gyro/scene": 1, "/gyro/stator_commands": 2, "/gyro/status": 0})
+    expected.update({"/gyro/scene": 1, "/gyro/stator_commands": 2, "/gyro/status": 0, "/gyro/effects": 0})
     assert counts == expected
     assert stats.message_count == 6 * n + 3
     assert stats.message_start_time == 0

@@ -28,9 +28,9 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParam
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from ..messages import (TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS,
-                        TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, stamp_ns, state_messages,
-                        status_message, to_ros)
+from ..messages import (TOPIC_CLOCK, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT,
+                        TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, effects_message,
+                        stamp_ns, state_messages, status_message, to_ros)
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
 from .common import message_class, node_main, parse_command, qos_profile
@@ -60,6 +60,9 @@ class SimulatorNode(Node):
         self.commands: "queue.Queue" = queue.Queue()
         self.pubs = {t: self.create_publisher(message_class(TOPICS[t]), t, qos_profile(t)) for t in
                      STATE_TOPICS + (TOPIC_STATUS,)}
+        if self.scene.effects.flywheel is not None or self.scene.effects.damper is not None:
+            self.pubs[TOPIC_EFFECTS] = self.create_publisher(message_class(TOPICS[TOPIC_EFFECTS]), TOPIC_EFFECTS,
+                                                             qos_profile(TOPIC_EFFECTS))
         self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), TOPIC_STATOR_COMMANDS,
                                  self._on_command, qos_profile(TOPIC_STATOR_COMMANDS))
         self.latencies: list[float] = []
@@ -109,9 +112,19 @@ class SimulatorNode(Node):
             msgs = state_messages(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i], s["torque"][i],
                                   names, s["current"][i], s["rate"][i], s["phase"][i])
             # the clock first, then the state; the stator state last (a tick's state is complete after it)
-            for topic in (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS):
-                self.pubs[topic].publish(to_ros(message_class(TOPICS[topic]), msgs[topic]))
+            eff = effects_message(s["t"][i], {k: v[i] for k, v in s["effects"].items()}) if s["effects"] else None
+            if eff is not None:
+                msgs[TOPIC_EFFECTS] = eff
+            for topic in (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_EFFECTS,
+                          TOPIC_STATORS):
+                if topic in msgs:
+                    self.pubs[topic].publish(to_ros(message_class(TOPICS[topic]), msgs[topic]))
             self.published_wall[stamp_ns(s["t"][i])] = now
+
+
+def last_sample(s: dict) -> dict:
+    """The last row of a samples dict (:meth:`Runner.samples`), as a one-row samples dict."""
+    return {k: ({n: a[-1:] for n, a in v.items()} if isinstance(v, dict) else v[-1:]) for k, v in s.items()}
 
 
 def run_node(node: SimulatorNode, stop: threading.Event) -> int:
@@ -217,11 +230,12 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
             s = runner.samples(rows)
             node.publish_samples(s, names)
             if s["t"].size:
-                last_published["s"] = {k: v[-1:] for k, v in s.items()}
+                last_published["s"] = last_sample(s)
             if recorder is not None:
                 for i in range(s["t"].size):
                     recorder.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],
-                                          s["torque"][i], names, s["current"][i], s["rate"][i], s["phase"][i])
+                                          s["torque"][i], names, s["current"][i], s["rate"][i], s["phase"][i],
+                                          {k: v[i] for k, v in s["effects"].items()})
             if mode == "realtime":
                 ahead = wall0 + runner.sim.t / factor - time.perf_counter()
                 if ahead > 0:
