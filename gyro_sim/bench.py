@@ -61,6 +61,8 @@ __all__ = [
 DEFAULT_SCENES = ("spinup_thin_shell", "spinup_solid_sphere")
 TARGET_ERROR = 1e-6
 OURS = "gyro_sim"  # method label prefix of the project's integrator
+STAGES = {"lawson8": 12, "etdrk4": 4}  # right-hand-side evaluations per step
+ORDER = {"lawson8": 8, "etdrk4": 4}
 BASELINES = ("DOP853", "LSODA")
 
 
@@ -212,8 +214,15 @@ def fidelity_levels() -> list[str]:
     return sorted(set(levels), key=lambda s: (s != "full", s))
 
 
+def ours_levels() -> list[str]:
+    """What the work-precision table runs of ours: every fidelity level, and the full model once more
+    with its other stepper forced (``full/etdrk4``; ``full`` itself picks lawson8 where no mode is stiff)."""
+    levels = fidelity_levels()
+    return levels[:1] + ["full/etdrk4"] + levels[1:]
+
+
 def _method_label(level: str) -> str:
-    return f"{OURS} {level}" + (" (ETDRK4)" if level == "full" else "")
+    return f"{OURS} {level}"
 
 
 def _timed(fn: Callable, min_wall: float = 0.0, max_reps: int = 1):
@@ -238,7 +247,9 @@ def _scene_overrides(spt: Optional[int], level: str, extra: Optional[dict]) -> d
     ov: dict = {"controller": None}
     if spt is not None:
         ov["integrator.steps_per_turn"] = int(spt)
-    if level != "full":
+    if level.startswith("full/"):
+        ov["integrator.method"] = level.split("/", 1)[1]
+    elif level != "full":
         ov["fidelity"] = level
     ov.update(extra or {})
     return ov
@@ -248,18 +259,20 @@ def run_ours(scene_name: str, horizon: float, spt: Optional[int] = None, level: 
              extra: Optional[dict] = None, min_wall: float = 0.0, max_reps: int = 1) -> Row:
     """``gyro_sim.run`` of the scene (controller removed) over ``horizon`` s; wall includes setup.
 
-    RHS evaluations of the full level: 4 per ETDRK4 step + 1 per output sample (the torque).
+    RHS evaluations of the full level: 12 per lawson8 step or 4 per ETDRK4 step (the stepper the run
+    starts with) + 1 per output sample (the torque).
     """
     from .scene import load_scene
-    from .simulate import run
+    from .simulate import DEFAULT_STEPS_PER_TURN, Simulator, run
 
     scene = load_scene(scene_name, overrides=_scene_overrides(spt, level, extra))
+    method = Simulator(scene)._method()
     wall, cpu, res = _timed(lambda: run(scene, duration=horizon), min_wall, max_reps)
     steps = int(res.steps)
-    # ETDRK4: 4 per step + 1 per output sample; an averaged stretch adds its own (solve_ivp) count
-    rhs = 4 * steps + int(res.t.size) + int(getattr(res, "averaged_rhs_evaluations", 0) or 0)
+    # per step + 1 per output sample; an averaged stretch adds its own (solve_ivp) count
+    rhs = STAGES[method] * steps + int(res.t.size) + int(getattr(res, "averaged_rhs_evaluations", 0) or 0)
     segments = getattr(res, "averaged_segments", None) or []
-    value = float(spt if spt is not None else scene.integrator.steps_per_turn)
+    value = float(spt if spt is not None else (scene.integrator.steps_per_turn or DEFAULT_STEPS_PER_TURN[method]))
     return Row(scene_name, horizon, _method_label(level), "steps_per_turn", value, wall, steps, int(rhs),
                L=res.L[-1].copy(), q=res.q[-1].copy(), averaged=float(sum(t1 - t0 for t0, t1 in segments)),
                cpu=cpu)
@@ -460,7 +473,7 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
         _say(f"    cross-check DOP853 rtol={cfg.rtol_ref:.0e}: agreement {ref_info['agreement']:.2e}")
     res.refs.append(ref_info)
     rows: list[Row] = []
-    for level in fidelity_levels():
+    for level in ours_levels():
         for spt in cfg.steps_per_turn:
             try:
                 r = run_ours(scene, horizon, spt, level, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
@@ -511,7 +524,7 @@ def mode_cost(res: Results) -> None:
     scene, T = cfg.mode_scene, cfg.mode_horizon
     out = {}
     for n in cfg.mode_counts:
-        r = run_ours(scene, T, None, "full", {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+        r = run_ours(scene, T, None, "full/etdrk4", {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
         out[n] = r
         res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting, "horizon": T,
                           "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs, "rtf": r.rtf,
@@ -522,7 +535,7 @@ def mode_cost(res: Results) -> None:
         Tb = cfg.mode_baseline_horizon
         for method in cfg.baselines:
             for n in cfg.mode_counts:
-                ref = run_ours(scene, Tb, None, "full", {"modes": int(n)})
+                ref = run_ours(scene, Tb, None, "full/etdrk4", {"modes": int(n)})
                 r = run_baseline(scene, Tb, method, 1e-6, float(np.linalg.norm(ref.L)) or 1.0, {"modes": int(n)})
                 res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting,
                                   "horizon": Tb, "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs,
@@ -567,17 +580,17 @@ def realtime_factor(res: Results) -> None:
 def long_spinup(res: Results) -> None:
     """20-minute spin-up of the default scene without its controller, at each fidelity level.
 
-    Error estimate of the default steps_per_turn from the run at twice as many steps (4th order:
-    err(h) ≈ |y(h) − y(h/2)| · 16/15); other levels against the run at twice the steps (of L alone
+    Error estimate of the default steps_per_turn from the run at twice as many steps (order p of the
+    stepper: err(h) ≈ |y(h) − y(h/2)| · 2^p/(2^p − 1)); other levels against the run at twice the steps (of L alone
     where they averaged the spin phase out).
     """
     from .scene import load_scene
-    from .simulate import run
+    from .simulate import DEFAULT_STEPS_PER_TURN, Simulator, run
 
     cfg = res.config
     T = cfg.spinup_duration
     base = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None})
-    spt0 = base.integrator.steps_per_turn
+    spt0 = base.integrator.steps_per_turn or DEFAULT_STEPS_PER_TURN[Simulator(base)._method()]
     runs = {}
     for spt in (spt0, 2 * spt0):
         sc = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None,
@@ -598,8 +611,9 @@ def long_spinup(res: Results) -> None:
                 "spin_rev_s": float(r.spin_rate[-1] / (2 * math.pi)),
                 "spin_fraction": float(r.spin_rate[-1] / target), "theta_deg": float(np.degrees(r.theta[-1]))}
 
-    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={spt0}", w1, c1, r1, d * 16 / 15, dL * 16 / 15))
-    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={2 * spt0}", w2, c2, r2, d / 15, dL / 15))
+    f = 2.0 ** ORDER[Simulator(base)._method()]
+    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={spt0}", w1, c1, r1, d * f / (f - 1), dL * f / (f - 1)))
+    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={2 * spt0}", w2, c2, r2, d / (f - 1), dL / (f - 1)))
     for level in fidelity_levels():
         if level == "full":
             continue
@@ -930,8 +944,8 @@ def markdown(res: Results) -> str:
                      f"| {s['steps']} | {s['averaged']:.4g} | {s['rtf']:.3g} | {_fmt(s['error'], '.1e')} "
                      f"| {_fmt(s['error_L'], '.1e')} | {s['spin_rev_s']:.2f} | {s['spin_fraction']:.6f} "
                      f"| {s['theta_deg']:.3g} |")
-        L += ["", "Errors of the full model at steps_per_turn = N are estimated from the run at 2N (4th order: "
-              "|y_N − y_2N| · 16/15); other levels are compared with the 2N run (of L alone where they averaged "
+        L += ["", "Errors of the full model at steps_per_turn = N are estimated from the run at 2N (order p of "
+              "the stepper: |y_N − y_2N| · 2^p/(2^p − 1)); other levels are compared with the 2N run (of L alone where they averaged "
               "the spin phase out: their attitude is not a result there).", ""]
     if res.profile:
         L += ["## Where the time goes (compiled kernels; CPU ns, least of 3)", "", "| case | what | ns |",

@@ -291,6 +291,22 @@ def _q_exp(q, u0, u1, u2, out):
     _qmul(q[0], q[1], q[2], q[3], c, sc * u0, sc * u1, sc * u2, out)
 
 
+@njit(cache=True, inline="always")
+def _dcayinv(u0, u1, u2, v0, v1, v2, out):
+    """out = u' for R = R_n cay(u) with body rates v (R' = R v̂): v + ½ u×v + ¼ (u·v) u, exact (Cayley map)."""
+    d = 0.25 * (u0 * v0 + u1 * v1 + u2 * v2)
+    out[0] = v0 + 0.5 * (u1 * v2 - u2 * v1) + d * u0
+    out[1] = v1 + 0.5 * (u2 * v0 - u0 * v2) + d * u1
+    out[2] = v2 + 0.5 * (u0 * v1 - u1 * v0) + d * u2
+
+
+@njit(cache=True, inline="always")
+def _q_cay(q, u0, u1, u2, out):
+    """out = q ⊗ cay(u): the quaternion (1, u/2)/√(1 + |u|²/4) (a rotation by 2 atan(|u|/2) about u; no trig)."""
+    nrm = 1.0 / math.sqrt(1.0 + 0.25 * (u0 * u0 + u1 * u1 + u2 * u2))
+    _qmul(q[0], q[1], q[2], q[3], nrm, 0.5 * u0 * nrm, 0.5 * u1 * nrm, 0.5 * u2 * nrm, out)
+
+
 @njit(cache=True)
 def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work, K, eff):
     """One step of ETDRK4 with the attitude advanced on the rotation group (RKMK4, in place on y).
@@ -501,5 +517,128 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
             out_N[k_out, 0] = 0.0
             out_N[k_out, 1] = 0.0
             out_N[k_out, 2] = 0.0
+            k_out += 1
+    return k_out, steps
+
+
+# ----------------------------------------------------------------------------------------
+# Lawson (integrating-factor) explicit Runge–Kutta with the attitude on the rotation group
+
+
+def dop853_tableau() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, b, c) of the 12-stage, 8th-order Dormand–Prince method (Hairer, Nørsett & Wanner; SciPy's table)."""
+    from scipy.integrate._ivp import dop853_coefficients as d
+
+    s = d.N_STAGES
+    return (np.ascontiguousarray(d.A[:s, :s], dtype=float), np.ascontiguousarray(d.B, dtype=float),
+            np.ascontiguousarray(d.C[:s], dtype=float))
+
+
+@njit(cache=True)
+def lawson_coefficients(lam, h, c, E0, EC, EB, Eh):
+    """Integrating factors of a step h: E0[i,k] = e^{c_i h λ_k}, EC[i,j,k] = e^{(c_i − c_j) h λ_k},
+    EB[j,k] = e^{(1 − c_j) h λ_k}, Eh[k] = e^{h λ_k}."""
+    S = c.shape[0]
+    for k in range(lam.shape[0]):
+        Eh[k] = math.exp(lam[k] * h)
+        for i in range(S):
+            E0[i, k] = math.exp(c[i] * h * lam[k])
+            EB[i, k] = math.exp((1.0 - c[i]) * h * lam[k])
+            for j in range(i):
+                EC[i, j, k] = math.exp((c[i] - c[j]) * h * lam[k])
+
+
+@njit(cache=True)
+def lawson_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c, E0, EC, EB, Eh, Fs, Ys, Ks, work,
+                    qn, eff):
+    """One step of a Lawson RK (tableau A, b, c) for L and the eddy modes, RKMK on the attitude (in place).
+
+    With v = e^{−λt} y the linear decay of the modes is exact and the tableau integrates the rest, so
+    the method keeps the tableau's order where h/τ_n is moderate (the thin shell); the attitude is
+    q_n ⊗ cay(u), u from the same tableau applied to u' = dcay⁻¹(Ω_b) (Munthe-Kaas with the Cayley
+    map: exact as exp, and free of trigonometric functions).
+    """
+    n = y.shape[0]
+    S = c.shape[0]
+    for k in range(4):
+        qn[k] = y[3 + k]
+    for i in range(S):
+        for k in range(3):  # L: no linear part
+            acc = 0.0
+            for j in range(i):
+                acc += A[i, j] * Fs[j, k]
+            Ys[k] = y[k] + h * acc
+        for k in range(7, n):
+            acc = 0.0
+            for j in range(i):
+                acc += A[i, j] * EC[i, j, k] * Fs[j, k]
+            Ys[k] = E0[i, k] * y[k] + h * acc
+        u0 = u1 = u2 = 0.0
+        for j in range(i):
+            u0 += A[i, j] * Ks[j, 0]
+            u1 += A[i, j] * Ks[j, 1]
+            u2 += A[i, j] * Ks[j, 2]
+        u0 *= h
+        u1 *= h
+        u2 *= h
+        _q_cay(qn, u0, u1, u2, Ys[3:7])
+        nonlinear_part(s + c[i] * h, Ys, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[i], work, eff)
+        _dcayinv(u0, u1, u2, work[12], work[13], work[14], Ks[i])
+    for k in range(n):
+        if 3 <= k <= 6:
+            continue
+        acc = 0.0
+        for j in range(S):
+            acc += b[j] * EB[j, k] * Fs[j, k]
+        y[k] = Eh[k] * y[k] + h * acc
+    u0 = u1 = u2 = 0.0
+    for j in range(S):
+        u0 += b[j] * Ks[j, 0]
+        u1 += b[j] * Ks[j, 1]
+        u2 += b[j] * Ks[j, 2]
+    _q_cay(qn, h * u0, h * u1, h * u2, Ys[3:7])
+    for k in range(4):
+        y[3 + k] = Ys[3 + k]
+    _normalize_q(y)
+
+
+@njit(cache=True)
+def integrate_lawson(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
+                     out_y, out_N, k_out, eff, A, b, c):
+    """:func:`integrate_etd`'s contract with :func:`lawson_lie_step` (tableau A, b, c) as the step."""
+    n = y.shape[0]
+    nm = (n - 7 - int(eff[NE])) // 3
+    eff[T0] = t_seg
+    S = c.shape[0]
+    E0 = np.empty((S, n))
+    EC = np.zeros((S, S, n))
+    EB = np.empty((S, n))
+    Eh = np.empty(n)
+    Fs = np.empty((S, n))
+    Ys = np.empty(n)
+    Ks = np.empty((S, 3))
+    work = np.empty(25)
+    qn = np.empty(4)
+    h_last = -1.0
+    steps = 0
+    t = t0
+    for i in range(t_stops.shape[0]):
+        span = t_stops[i] - t
+        if span > 0.0:
+            k, h = _equal_steps(span, h_max)
+            if h != h_last:
+                lawson_coefficients(lam, h, c, E0, EC, EB, Eh)
+                h_last = h
+            for j in range(k):
+                lawson_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c,
+                                E0, EC, EB, Eh, Fs, Ys, Ks, work, qn, eff)
+            steps += k
+            t = t_stops[i]
+        if record[i]:
+            out_y[k_out, :] = y
+            nonlinear_part(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[0], work, eff)
+            out_N[k_out, 0] = Fs[0, 0]
+            out_N[k_out, 1] = Fs[0, 1]
+            out_N[k_out, 2] = Fs[0, 2]
             k_out += 1
     return k_out, steps

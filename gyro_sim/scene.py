@@ -38,7 +38,9 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     duration: 60.0                   # s
     output: {rate: 100.0}            # samples per second of simulated time
     integrator:
-      steps_per_turn: 48             # steps per period of the fastest rotation (spin or field)
+      method: auto                   # lawson8 | etdrk4 | auto: lawson8 unless an eddy mode is stiff (h > 2τ_n)
+      steps_per_turn: null           # steps per period of the fastest rotation (spin or field);
+                                     # default 12 for lawson8, 48 for etdrk4
       max_step: null                 # optional upper bound on the step, s
     controller:                      # optional: a law of gyro_ctl run every period (s)
       law: psi_switching             # spinup | psi_switching
@@ -183,7 +185,8 @@ class Output(_Strict):
 
 
 class Integrator(_Strict):
-    steps_per_turn: Annotated[int, Field(ge=4, le=100000)] = 48
+    method: Literal["auto", "lawson8", "etdrk4"] = "auto"
+    steps_per_turn: Optional[Annotated[int, Field(ge=4, le=100000)]] = None  # default: 12 (lawson8), 48 (etdrk4)
     max_step: Optional[Positive] = None
 
 

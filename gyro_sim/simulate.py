@@ -21,6 +21,11 @@ from .scene import Scene, SceneError
 
 __all__ = ["Simulator", "RunResult", "run", "stator_triad"]
 
+#: steps per turn of the fastest rotation when the scene gives none: both give L to ~1e-7 over the
+#: default scene's 2 s (docs/benchmark.md); lawson8 at about a quarter of etdrk4's cost
+DEFAULT_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
+_DOP853 = kernels.dop853_tableau()
+
 
 def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u."""
@@ -219,8 +224,21 @@ class Simulator:
             om = np.concatenate([om, self.field_om])
         return np.ascontiguousarray(Bre).reshape(-1, 3), np.ascontiguousarray(Bim).reshape(-1, 3), np.asarray(om, float)
 
-    def _max_step(self, free: bool) -> float:
+    def _method(self) -> str:
+        """The stepper: ``lawson8`` (8th-order Lawson–Dormand–Prince, RKMK attitude) unless an eddy mode is
+        stiff at the lawson8 step (h > 2 τ_n: the integrating factor then loses the order), else ``etdrk4``."""
+        m = self.scene.integrator.method
+        if m != "auto":
+            return m
+        if self.tau.size == 0:
+            return "lawson8"
+        h = self._max_step(False, "lawson8")
+        return "lawson8" if h <= 2.0 * float(np.min(self.tau)) else "etdrk4"
+
+    def _max_step(self, free: bool, method: Optional[str] = None) -> float:
         spt = self.scene.integrator.steps_per_turn
+        if spt is None:
+            spt = DEFAULT_STEPS_PER_TURN["free" if free else (method or self._method())]
         L = np.linalg.norm(self.y[0:3])
         if free:
             if self._free_axis != -1:
@@ -281,6 +299,10 @@ class Simulator:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
                 out_y, out_N, k_out)
+        elif self._method() == "lawson8":
+            k_out, steps = kernels.integrate_lawson(
+                self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
+                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_DOP853)
         else:
             k_out, steps = kernels.integrate_etd(
                 self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
