@@ -8,6 +8,8 @@
     gyro-sim phase SCENE|BAG        (θ, φ) phase portrait over the averaged ψ-switching model
     gyro-sim bench [--quick]        work-precision benchmark (table + PNG)
     gyro-sim sweep SCENE|SWEEP ...  parameter sweeps and Monte Carlo on Dask
+    gyro-sim flywheel-plan ...      wheel axis, turn and speed profile for a wanted attitude ([S]);
+                                    --write-scene FILE writes a ready-to-run scene
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
@@ -100,6 +102,37 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("bench", help="work-precision benchmark (gyro-sim bench --help)", add_help=False)
 
     sub.add_parser("sweep", help="parameter sweeps and Monte Carlo on Dask (gyro-sim sweep --help)", add_help=False)
+
+    fp = sub.add_parser(
+        "flywheel-plan",
+        help="plan a reorientation of the body by its internal flywheel ([S], docs/flywheel.md)",
+        description="Wheel axis (body frame), wheel turn and a trapezoid speed profile that take a body at rest "
+                    "(zero kinetic moment) from the initial to the target attitude ([S] (21)-(24), (29)). "
+                    "Attitudes are quaternions w x y z, body to case, or z-x-z Euler angles psi theta phi (rad). "
+                    "Give two of --peak-speed, --ramp, --duration (or --duration alone; default --duration 1).",
+    )
+    fp.add_argument("--inertia", metavar="J", type=float, nargs=3, required=True,
+                    help="principal moments J1 J2 J3 of the body with the wheel locked, kg·m²")
+    fp.add_argument("--wheel-inertia", metavar="JF", type=float, required=True,
+                    help="axial moment of the wheel, kg·m²")
+    tgt = fp.add_mutually_exclusive_group(required=True)
+    tgt.add_argument("--target-quaternion", metavar="Q", type=float, nargs=4, help="target attitude w x y z")
+    tgt.add_argument("--target-euler", metavar="A", type=float, nargs=3, help="target attitude psi theta phi, rad")
+    ini = fp.add_mutually_exclusive_group()
+    ini.add_argument("--initial-quaternion", metavar="Q", type=float, nargs=4,
+                     help="initial attitude (default 1 0 0 0)")
+    ini.add_argument("--initial-euler", metavar="A", type=float, nargs=3, help="initial attitude psi theta phi, rad")
+    fp.add_argument("--peak-speed", metavar="W", type=float, default=None, help="peak wheel speed, rad/s")
+    fp.add_argument("--ramp", metavar="S", type=float, default=None, help="acceleration (and deceleration) time, s")
+    fp.add_argument("--duration", metavar="S", type=float, default=None, help="start-to-stop time of the wheel, s")
+    fp.add_argument("--start", metavar="S", type=float, default=0.0, help="time the wheel starts, s (default 0)")
+    fp.add_argument("--hold", metavar="S", type=float, default=0.5,
+                    help="with --write-scene: simulated time after the wheel stops, s (default 0.5)")
+    fp.add_argument("--write-scene", metavar="FILE", type=Path, default=None,
+                    help="write a ready-to-run scene YAML (gyro-sim run FILE); "
+                         "refuses an existing file without --force")
+    fp.add_argument("--force", action="store_true", help="with --write-scene: overwrite FILE")
+    fp.set_defaults(func=_cmd_flywheel_plan)
 
     scenes = sub.add_parser(
         "scenes",
@@ -366,6 +399,61 @@ def _cmd_phase(args) -> int:
     png = args.out or Path("runs") / f"{scene.name}_phase.png"
     plot_phase(res, png, scene)
     _write(sys.stdout, f"phase portrait: {png}\n")
+    return EXIT_OK
+
+
+def _cmd_flywheel_plan(args) -> int:
+    import yaml
+
+    from gyro_sim import flywheel
+
+    nums = {"--inertia": args.inertia, "--wheel-inertia": [args.wheel_inertia],
+            "--target-quaternion": args.target_quaternion, "--target-euler": args.target_euler,
+            "--initial-quaternion": args.initial_quaternion, "--initial-euler": args.initial_euler,
+            "--peak-speed": [args.peak_speed], "--ramp": [args.ramp], "--duration": [args.duration],
+            "--start": [args.start], "--hold": [args.hold]}
+    for opt, vals in nums.items():
+        if vals is not None and not all(v is None or math.isfinite(v) for v in vals):
+            return _error(f"{opt} {' '.join(str(v) for v in vals)}: must be finite numbers")
+    if args.start < 0 or args.hold <= 0:
+        return _error(f"--start {args.start} / --hold {args.hold}: need start >= 0 s and hold > 0 s")
+    duration = args.duration
+    given = [v is not None for v in (args.peak_speed, args.ramp, duration)]
+    if all(given):
+        return _error("--peak-speed, --ramp, --duration: give two of them (the wheel turn fixes the third)")
+    if not any(given):
+        duration = 1.0
+    try:
+        q1 = flywheel.quat_from_euler_zxz(*args.target_euler) if args.target_euler else args.target_quaternion
+        q0 = (flywheel.quat_from_euler_zxz(*args.initial_euler) if args.initial_euler
+              else args.initial_quaternion or (1.0, 0.0, 0.0, 0.0))
+        plan = flywheel.plan_reorientation(args.inertia, args.wheel_inertia, q1, q0, peak_speed=args.peak_speed,
+                                           ramp=args.ramp, duration=duration, start=args.start)
+    except ValueError as exc:
+        return _error(str(exc))
+    text = "".join(line + "\n" for line in plan.lines())
+    if args.write_scene is not None:
+        from gyro_sim.scene import SceneError, scene_from_dict
+
+        path = args.write_scene
+        if path.exists() and not args.force:
+            return _error(f"--write-scene {path}: already exists; give a new file or --force")
+        data = flywheel.plan_scene(plan, name=path.stem, hold=args.hold)
+        try:
+            scene_from_dict(data, where=str(path))
+        except SceneError as exc:  # e.g. inertia outside the scene's limits
+            return _error(str(exc))
+        header = ("# Written by gyro-sim flywheel-plan ([S], docs/flywheel.md). The body, at rest, is turned by its\n"
+                  "# internal flywheel to the target attitude; plan:\n"
+                  + "".join(f"#   {line}\n" for line in plan.lines()))
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            body = yaml.safe_dump(data, sort_keys=False, allow_unicode=True, default_flow_style=None, width=120)
+            path.write_text(header + body, encoding="utf-8")
+        except OSError as exc:
+            return _error(f"cannot write the scene {path}: {exc.strerror or exc}")
+        text += f"{'scene written':<20} {path}  (run: gyro-sim run {path})\n"
+    _write(sys.stdout, text)
     return EXIT_OK
 
 
