@@ -660,7 +660,7 @@ def profile_kernels(res: Results) -> None:
         n = 500_000
         t_rhs = min(_once(lambda: loop_rhs(n, *args)) for _ in range(3)) / n
         t_field = min(_once(lambda: loop_field(n, Bre, Bim, om, work[0:3], work[3:6])) for _ in range(3)) / n
-        h = sim._max_step(False)
+        h = sim._max_step(False, "etdrk4")
         k = 200_000
         stops, rec = np.array([k * h]), np.array([False])
         oy, oN = np.zeros((1, y.size)), np.zeros((1, 3))
@@ -684,7 +684,7 @@ def profile_kernels(res: Results) -> None:
              f"step {t_step * 1e9:.0f} ns ({t_step / t_rhs:.2f} RHS), NumPy RHS {t_np * 1e9:.0f} ns")
     # Python cost of one call of Simulator.advance (tiny span: one step)
     sim = Simulator(load_scene("spinup_thin_shell", overrides={"controller": None}))
-    h = sim._max_step(False)
+    h = sim._max_step(False, "etdrk4")
     m = 2000
     t_adv = _once(lambda: [sim.advance(sim.t + 0.5 * h) for _ in range(m)]) / m
     res.profile.append({"case": "spinup_thin_shell", "what": "Simulator.advance call of one step (Python + 1 step)",

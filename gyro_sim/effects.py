@@ -152,6 +152,15 @@ def flywheel_speed(t, eff):
 
 
 @njit(cache=True)
+def flywheel_moment(t, eff, derivative):
+    """The wheel's relative kinetic moment h = J_f Ω_f(t) a (N·m·s, body frame), or with
+    ``derivative`` = 1 its rate ḣ = J_f dΩ_f/dt a (N·m)."""
+    w, acc = flywheel_speed(t, eff)
+    m = eff[FLY + 1] * (acc if derivative else w)
+    return m * eff[FLY + 2], m * eff[FLY + 3], m * eff[FLY + 4]
+
+
+@njit(cache=True)
 def _fly_angle(t, eff):
     """∫ Ω_f from the first knot to t (rad), constant extension outside the table."""
     i, n = _fly_segment(t, eff)
@@ -193,11 +202,10 @@ def body_rate(t, Lbx, Lby, Lbz, y, k0, Jinv, eff):
     (J + m(|r|²I − r rᵀ)) Ω = L_b − h − m r × v, r = ρ e3 + u.
     """
     if eff[FLY] != 0.0:
-        wf, _ = flywheel_speed(t, eff)
-        h = eff[FLY + 1] * wf
-        Lbx -= h * eff[FLY + 2]
-        Lby -= h * eff[FLY + 3]
-        Lbz -= h * eff[FLY + 4]
+        hx, hy, hz = flywheel_moment(t, eff, 0)
+        Lbx -= hx
+        Lby -= hy
+        Lbz -= hz
     if eff[DMP] == 0.0:
         return Jinv[0] * Lbx, Jinv[1] * Lby, Jinv[2] * Lbz
     m = eff[DMP + 1]
@@ -279,11 +287,10 @@ def damper_derivs(t, y, k0, Jinv, eff, Lbx, Lby, Lbz, Ox, Oy, Oz, Nbx, Nby, Nbz,
     gy = Nby - (Oz * Lbx - Ox * Lbz) - m * (2.0 * rv * Oy - vy * rO - ry * vO) - m * (rz * fx - rx * fz)
     gz = Nbz - (Ox * Lby - Oy * Lbx) - m * (2.0 * rv * Oz - vz * rO - rz * vO) - m * (rx * fy - ry * fx)
     if eff[FLY] != 0.0:
-        _, acc = flywheel_speed(t, eff)
-        hd = eff[FLY + 1] * acc
-        gx -= hd * eff[FLY + 2]
-        gy -= hd * eff[FLY + 3]
-        gz -= hd * eff[FLY + 4]
+        hx, hy, hz = flywheel_moment(t, eff, 1)
+        gx -= hx
+        gy -= hy
+        gz -= hz
     dOx, dOy, dOz = Jinv[0] * gx, Jinv[1] * gy, Jinv[2] * gz
     F[k0] = vx
     F[k0 + 1] = vy

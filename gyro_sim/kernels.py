@@ -16,7 +16,8 @@ Field: B(t) = Σ_p [Bre_p cos(ω_p s) + Bim_p sin(ω_p s)], s = t − t_seg (cas
 
 Steppers:
 
-* :func:`integrate_etd` — exponential RK4 (Cox & Matthews 2002, ETDRK4) for L and the eddy
+* :func:`integrate` — with fields: the 8th-order Lawson RK of :func:`lawson_lie_step` (lawson8), or
+  (:func:`integrate_etd`) exponential RK4 (Cox & Matthews 2002, ETDRK4) for L and the eddy
   modes: the stiff linear parts −e_n/τ_n are integrated exactly (φ-functions), so short τ_n
   never force short steps; the attitude takes the same RK4 stages on the rotation group
   (RKMK4, :func:`etd_lie_step`), exact for a constant body rate.
@@ -161,10 +162,13 @@ def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
     F[4] = 0.5 * (q0 * Ox + q2 * Oz - q3 * Oy)
     F[5] = 0.5 * (q0 * Oy + q3 * Ox - q1 * Oz)
     F[6] = 0.5 * (q0 * Oz + q1 * Oy - q2 * Ox)
-    F[0] = F[1] = F[2] = 0.0
-    for i in range(7, F.shape[0]):
+    for i in range(k0, F.shape[0]):  # extra states: the damper writes its own below
         F[i] = 0.0
-    if c_m != 0.0 or mag:
+    if c_m == 0.0 and not mag:
+        F[0] = F[1] = F[2] = 0.0
+        for i in range(7, k0):
+            F[i] = 0.0
+    else:
         Bbx, Bby, Bbz = _rotl(w0, -x0, -y0, -z0, Bx, By, Bz)
         dbx, dby, dbz = _rotl(w0, -x0, -y0, -z0, dBx, dBy, dBz)
         if mag:
@@ -371,47 +375,10 @@ def _equal_steps(span, h_max):
 @njit(cache=True)
 def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
                   out_y, out_N, k_out, eff):
-    """Integrate y from t0 through each time in ``t_stops`` (increasing) with ETDRK4.
-
-    Each interval between stops is split into equal steps no longer than ``h_max``. Where
-    ``record[i]`` the state and the torque (case, N·m) at ``t_stops[i]`` are written to
-    ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns (k_out, steps).
-    """
-    n = y.shape[0]
-    nm = (n - 7 - int(eff[NE])) // 3
-    eff[T0] = t_seg
-    buf = np.empty((7, n))
-    work = np.empty(25)
-    K = np.empty(16)
-    E = np.empty(n)
-    E2 = np.empty(n)
-    Q = np.empty(n)
-    A1 = np.empty(n)
-    A2 = np.empty(n)
-    A3 = np.empty(n)
-    h_last = -1.0
-    steps = 0
-    t = t0
-    for i in range(t_stops.shape[0]):
-        span = t_stops[i] - t
-        if span > 0.0:
-            k, h = _equal_steps(span, h_max)
-            if h != h_last:
-                etd_coefficients(lam, h, E, E2, Q, A1, A2, A3)
-                h_last = h
-            for j in range(k):
-                etd_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
-                             E, E2, Q, A1, A2, A3, buf, work, K, eff)
-            steps += k
-            t = t_stops[i]
-        if record[i]:
-            out_y[k_out, :] = y
-            nonlinear_part(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, buf[0], work, eff)
-            out_N[k_out, 0] = buf[0, 0]
-            out_N[k_out, 1] = buf[0, 1]
-            out_N[k_out, 2] = buf[0, 2]
-            k_out += 1
-    return k_out, steps
+    """:func:`integrate` with the ETDRK4 step."""
+    no = np.empty(0)
+    return integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
+                     out_y, out_N, k_out, eff, np.empty((0, 0)), no, no)
 
 
 # ----------------------------------------------------------------------------------------
@@ -603,22 +570,39 @@ def lawson_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c, E0, 
 
 
 @njit(cache=True)
-def integrate_lawson(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
-                     out_y, out_N, k_out, eff, A, b, c):
-    """:func:`integrate_etd`'s contract with :func:`lawson_lie_step` (tableau A, b, c) as the step."""
+def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
+              out_y, out_N, k_out, eff, A, b, c):
+    """Integrate y from t0 through each time in ``t_stops`` (increasing).
+
+    The step is :func:`lawson_lie_step` with the tableau (A, b, c), or :func:`etd_lie_step` (ETDRK4)
+    when the tableau is empty. Each interval between stops is split into equal steps no longer than
+    ``h_max``. Where ``record[i]`` the state and the torque (case, N·m) at ``t_stops[i]`` are
+    written to ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns (k_out, steps).
+    """
     n = y.shape[0]
     nm = (n - 7 - int(eff[NE])) // 3
     eff[T0] = t_seg
+    lawson = c.shape[0] > 0
     S = c.shape[0]
+    # Lawson: integrating factors, stage derivatives and states
     E0 = np.empty((S, n))
     EC = np.zeros((S, S, n))
     EB = np.empty((S, n))
     Eh = np.empty(n)
-    Fs = np.empty((S, n))
+    Fs = np.empty((max(S, 1), n))
     Ys = np.empty(n)
     Ks = np.empty((S, 3))
-    work = np.empty(25)
     qn = np.empty(4)
+    # ETDRK4: coefficients and stage buffers
+    buf = np.empty((7, n))
+    K = np.empty(16)
+    E = np.empty(n)
+    E2 = np.empty(n)
+    Q = np.empty(n)
+    A1 = np.empty(n)
+    A2 = np.empty(n)
+    A3 = np.empty(n)
+    work = np.empty(25)
     h_last = -1.0
     steps = 0
     t = t0
@@ -627,11 +611,18 @@ def integrate_lawson(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
             if h != h_last:
-                lawson_coefficients(lam, h, c, E0, EC, EB, Eh)
+                if lawson:
+                    lawson_coefficients(lam, h, c, E0, EC, EB, Eh)
+                else:
+                    etd_coefficients(lam, h, E, E2, Q, A1, A2, A3)
                 h_last = h
             for j in range(k):
-                lawson_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c,
-                                E0, EC, EB, Eh, Fs, Ys, Ks, work, qn, eff)
+                if lawson:
+                    lawson_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c,
+                                    E0, EC, EB, Eh, Fs, Ys, Ks, work, qn, eff)
+                else:
+                    etd_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
+                                 E, E2, Q, A1, A2, A3, buf, work, K, eff)
             steps += k
             t = t_stops[i]
         if record[i]:

@@ -24,7 +24,8 @@ __all__ = ["Simulator", "RunResult", "run", "stator_triad"]
 #: steps per turn of the fastest rotation when the scene gives none: both give L to ~1e-7 over the
 #: default scene's 2 s (docs/benchmark.md); lawson8 at about a quarter of etdrk4's cost
 DEFAULT_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
-_DOP853 = kernels.dop853_tableau()
+#: (A, b, c) of each field stepper for kernels.integrate: DOP853's for lawson8, empty for ETDRK4
+_TABLEAU = {"lawson8": kernels.dop853_tableau(), "etdrk4": (np.empty((0, 0)), np.empty(0), np.empty(0))}
 
 
 def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,21 +225,28 @@ class Simulator:
             om = np.concatenate([om, self.field_om])
         return np.ascontiguousarray(Bre).reshape(-1, 3), np.ascontiguousarray(Bim).reshape(-1, 3), np.asarray(om, float)
 
-    def _method(self) -> str:
-        """The stepper: ``lawson8`` (8th-order Lawson–Dormand–Prince, RKMK attitude) unless an eddy mode is
-        stiff at the lawson8 step (h > 2 τ_n: the integrating factor then loses the order), else ``etdrk4``."""
+    def _step_plan(self, free: bool) -> tuple[str, float]:
+        """(stepper, largest step s) from now on. With fields: ``lawson8`` (8th-order Lawson–Dormand–Prince,
+        RKMK attitude) unless an eddy mode is stiff at the lawson8 step (h > 2 τ_n: the integrating
+        factor then loses the order), else ``etdrk4``; ``free`` for the torque-free stepper."""
+        if free:
+            return "free", self._max_step(True, "free")
         m = self.scene.integrator.method
-        if m != "auto":
-            return m
-        if self.tau.size == 0:
-            return "lawson8"
-        h = self._max_step(False, "lawson8")
-        return "lawson8" if h <= 2.0 * float(np.min(self.tau)) else "etdrk4"
+        if m == "auto":
+            h = self._max_step(False, "lawson8")
+            if self.tau.size == 0 or h <= 2.0 * float(np.min(self.tau)):
+                return "lawson8", h
+            m = "etdrk4"
+        return m, self._max_step(False, m)
 
-    def _max_step(self, free: bool, method: Optional[str] = None) -> float:
+    def _method(self) -> str:
+        """The stepper a field step would take now (see :meth:`_step_plan`)."""
+        return self._step_plan(False)[0]
+
+    def _max_step(self, free: bool, method: str) -> float:
         spt = self.scene.integrator.steps_per_turn
         if spt is None:
-            spt = DEFAULT_STEPS_PER_TURN["free" if free else (method or self._method())]
+            spt = DEFAULT_STEPS_PER_TURN[method]
         L = np.linalg.norm(self.y[0:3])
         if free:
             if self._free_axis != -1:
@@ -292,21 +300,17 @@ class Simulator:
         Bre, Bim, om = self.phasors()
         # no field (or no torque model) and no effect: the geometric free stepper
         free = (om.size == 0 or (self.c_m == 0.0 and self.eff[effects.MAG] == 0.0)) and self.eff[effects.ON] == 0.0
-        h_max = self._max_step(free)
+        method, h_max = self._step_plan(free)
         if not math.isfinite(h_max):
             h_max = max(t_end - self.t, 1e-300)
         if free:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
                 out_y, out_N, k_out)
-        elif self._method() == "lawson8":
-            k_out, steps = kernels.integrate_lawson(
-                self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_DOP853)
         else:
-            k_out, steps = kernels.integrate_etd(
+            k_out, steps = kernels.integrate(
                 self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out, self.eff)
+                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method])
         self.steps += steps
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
@@ -545,13 +549,15 @@ class Runner:
     def samples(self, rows: slice) -> dict:
         """Output rows as arrays: t, L, q, omega_b, euler, torque, energy, current, rate, phase."""
         L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
-        omega_b, eul, energy = derived_outputs(self.sim.J, L, q)
         extra = {}
         if self.sim.eff[effects.ON]:
             t = self.t_out[rows]
             omega_b = self.sim.body_rates(t, self.out_y[rows])
+            eul = euler_angles(quat_to_matrix(q), L)
             energy = 0.5 * np.einsum("ni,i,ni->n", omega_b, self.sim.J, omega_b)  # the rigid body's own
             extra = self.sim.effect_outputs(t, self.out_y[rows])
+        else:
+            omega_b, eul, energy = derived_outputs(self.sim.J, L, q)
         return {"t": self.t_out[rows], "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
                 "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
                 "effects": extra}
