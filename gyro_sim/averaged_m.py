@@ -452,10 +452,8 @@ class RotatingFieldM(AveragedM):
     def rates(self, L, rho, sigma, theta):
         return rates_rotating(self.a1, self.a2, self.B0, self.omega, self.J1, self.J3, L, rho, theta)  # [M] (3.17)
 
-    def combination_frequencies(self, L, theta):
-        l, w = L / self.J1, self.omega
-        nu = _nu(l, self.kappa, math.cos(theta))
-        return np.array([l + nu - w, l + nu + w, l - nu - w, l - nu + w, l - w, l + w, nu + w, nu - w, w])
+    # the same combinations l ± ν ± ω, l ± ω, ν ± ω, ω as the pulsating field's
+    combination_frequencies = PulsatingFieldM.combination_frequencies
 
     def small_theta_rate(self, L, rho=0.0):
         """(1/θ) dθ/dt (1/s) of (3.17) at θ → 0 for any ρ:

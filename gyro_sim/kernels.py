@@ -464,7 +464,7 @@ def free_step(y, h, Jinv, inv_ref, axis, tau):
 
 @njit(cache=True)
 def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_y, out_N, k_out):
-    """Torque-free counterpart of :func:`integrate_etd` (same stops/record/output contract).
+    """Torque-free counterpart of :func:`integrate` (same stops/record/output contract).
 
     ``axis``: body axis index carrying H_r (axisymmetric body: exact steps), −2 for a
     spherical inertia (H_r = 0), −1 for a triaxial body (4th-order midpoint composition).
