@@ -31,7 +31,11 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
         return f
 
     for t in topics:
-        node.create_subscription(message_class(TOPICS[t]), t, cb(t), qos_profile(t))
+        # the contract's QoS with a deep reader queue: the probe measures what was published, so a Python
+        # callback falling behind a burst must not drop samples (reliable keep_last drops the oldest)
+        qos = qos_profile(t)
+        qos.depth = max(qos.depth, 10000)
+        node.create_subscription(message_class(TOPICS[t]), t, cb(t), qos)
     open(out + ".ready", "w").close()  # subscriptions exist: the test may start publishers
     end = time.time() + seconds
     while time.time() < end and not (until and all(n >= until for n in counts.values())):

@@ -5,6 +5,7 @@ machine); every process it starts is ended at teardown, also when the test fails
 """
 import itertools
 import json
+import math
 import os
 import re
 import signal
@@ -24,6 +25,7 @@ from gyro_sim.rerun import rerun_bag  # noqa: E402
 
 pytestmark = pytest.mark.ros
 PROBE = str(Path(__file__).with_name("ros_probe.py"))
+ROOT = Path(__file__).resolve().parents[1]
 _domains = itertools.count((os.getpid() * 7) % 50)
 
 
@@ -140,7 +142,7 @@ def test_replay_republishes_a_bag(ros, tmp_path):
     out = tmp_path / "seen.json"
     probe = ros.start(PROBE, "listen", str(out), "60", "501", "/gyro/kinetic_moment", "/clock", "/gyro/imu")
     wait_ready(out)
-    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "2.0")
+    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "1.0")
     code, text = finish(rep, 60)
     assert code == 0, text
     finish(probe, 60)
@@ -226,21 +228,36 @@ def test_bad_parameters_are_refused(ros, which, params, fragment):
 
 
 def test_realtime_mode_paces_and_measures_latency(ros, tmp_path):
+    """Real time ×1 at a 200 Hz control rate: paced to the wall clock, latency measured, and the controller's
+    commands applied on most ticks from its first command to the end.
+
+    The rate is one a Python controller keeps up with on a loaded 2-core machine (at the scene's 1 kHz the
+    simulator, the controller and DDS share the cores and commands bunch up: then only the latest of a
+    bunch is applied, which is the real-time contract, but says nothing about this test's question).
+    """
+    scene = tmp_path / "nutation_oblate_200hz.yaml"
+    text = (ROOT / "config" / "nutation_oblate.yaml").read_text()
+    assert "period: 0.001" in text
+    scene.write_text(text.replace("period: 0.001", "period: 0.005"))
     bag = tmp_path / "rt"
-    sim = ros.simulator(scene="nutation_oblate", mode="realtime", duration=2.0, record=bag)
-    ros.controller(scene="nutation_oblate")
+    sim = ros.simulator(scene=str(scene), mode="realtime", duration=2.0, record=bag)
+    ros.controller(scene=str(scene))
     w0 = time.time()
     code, out = finish(sim)
     wall = time.time() - w0
     assert code == 0, out
     b = read_bag(bag)
     f = done_figures(b.status)
-    print(f"\n  real time ×1: 2 s simulated in {wall:.2f} s wall (process included); command latency "
-          f"median {f['latency_median_ms']:.3f} ms, p99 {f['latency_p99_ms']:.3f} ms; θ end "
-          f"{np.degrees(b.euler[-1, 1]):.3f}°")
+    first = b.command_t[0] if len(b.command_t) else math.inf
+    ticks_after_first = int(round((2.0 - first) / 0.005))
+    print(f"\n  real time ×1, 200 Hz control: 2 s simulated in {wall:.2f} s wall (process included); command "
+          f"latency median {f['latency_median_ms']:.3f} ms, p99 {f['latency_p99_ms']:.3f} ms; "
+          f"{len(b.command_t)} commands applied on the {ticks_after_first} ticks from the first "
+          f"(t = {first:.3f} s); θ end {np.degrees(b.euler[-1, 1]):.3f}°")
     assert wall >= 2.0  # paced: never ahead of the wall clock
     assert np.isfinite(f["latency_median_ms"]) and np.isfinite(f["latency_p99_ms"])
-    assert len(b.command_t) > 100 and np.max(b.current[:, 0]) > 0  # the controller's commands were applied
+    assert first < 1.0 and b.command_t[-1] > 1.9  # commands flowed through the run
+    assert len(b.command_t) > 0.5 * ticks_after_first and np.max(b.current[:, 0]) > 0
     # (whether ψ-switching still damps with this latency depends on the load of the machine: not asserted)
 
 
