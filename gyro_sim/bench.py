@@ -636,7 +636,7 @@ def long_spinup(res: Results) -> None:
 def profile_kernels(res: Results) -> None:
     """Cost of the compiled pieces on the default scene (thin shell) and the solid sphere.
 
-    ns per right-hand side (``kernels.nonlinear_part`` in a compiled loop), per field evaluation
+    ns per right-hand side (``kernels.nonlinear_part_at`` in a compiled loop), per field evaluation
     (``kernels.field_case``), per ETDRK4 step (``kernels.integrate_etd`` over one long span), the
     NumPy baseline's right-hand side, and the Python cost of one ``Simulator.advance`` call.
     """
@@ -675,7 +675,7 @@ def profile_kernels(res: Results) -> None:
         f = numpy_rhs(sim)
         m = 2000
         t_np = min(_once(lambda: [f(1e-3, y) for _ in range(m)]) for _ in range(3)) / m
-        for what, sec in (("RHS, compiled (nonlinear_part)", t_rhs), ("field B, dB/dt (field_case)", t_field),
+        for what, sec in (("RHS, compiled (nonlinear_part_at)", t_rhs), ("field B, dB/dt (field_case)", t_field),
                           ("ETDRK4 step (integrate_etd)", t_step), ("RHS, NumPy baseline", t_np)):
             res.profile.append({"case": label, "what": what, "ns": sec * 1e9})
         res.profile.append({"case": label, "what": "ETDRK4 step / compiled RHS", "ns": t_step / t_rhs,
@@ -696,19 +696,23 @@ _LOOPS: list = []
 
 
 def _profile_loops():
-    """Compiled loops around ``kernels.nonlinear_part`` and ``kernels.field_case`` (built once)."""
+    """Compiled loops around ``kernels.nonlinear_part_at`` (with the phases computed each call, as a
+    stepper's first stage does) and ``kernels.field_case`` (built once)."""
     if not _LOOPS:
         from numba import njit
 
         from . import kernels
 
-        nonlinear_part, field_case = kernels.nonlinear_part, kernels.field_case
+        nonlinear_part_at, phasor_trig, field_case = kernels.nonlinear_part_at, kernels.phasor_trig, kernels.field_case
 
         @njit(cache=False)
         def loop_rhs(n, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
             acc = 0.0
+            cs = np.empty(om.shape[0])
+            sn = np.empty(om.shape[0])
             for i in range(n):
-                nonlinear_part(1e-7 * i, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
+                phasor_trig(1e-7 * i, om, cs, sn)
+                nonlinear_part_at(cs, sn, 1e-7 * i, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
                 acc += F[0]
             return acc
 

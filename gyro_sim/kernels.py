@@ -105,9 +105,56 @@ def _rotl(w, x, y, z, vx, vy, vz):
     return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
 
 
+@njit(cache=True, inline="always")
+def phasor_trig(s, om, cs, sn):
+    """cs[p], sn[p] = cos(ω_p s), sin(ω_p s): the phases of the field's phasors at s = t − t_seg."""
+    for p in range(om.shape[0]):
+        cs[p] = math.cos(om[p] * s)
+        sn[p] = math.sin(om[p] * s)
+
+
+@njit(cache=True)
+def stage_trig_table(om, c, h, tab):
+    """tab[i, 0, p], tab[i, 1, p] = cos, sin(ω_p c_i h): the phase advance of each phasor to stage i."""
+    for i in range(c.shape[0]):
+        for p in range(om.shape[0]):
+            tab[i, 0, p] = math.cos(om[p] * c[i] * h)
+            tab[i, 1, p] = math.sin(om[p] * c[i] * h)
+
+
+@njit(cache=True, inline="always")
+def _stage_trig(i, tab, tw):
+    """tw[2:4] = the phases at stage i from those at the step's start tw[0:2] (angle addition)."""
+    for p in range(tw.shape[1]):
+        ci = tab[i, 0, p]
+        si = tab[i, 1, p]
+        tw[2, p] = tw[0, p] * ci - tw[1, p] * si
+        tw[3, p] = tw[1, p] * ci + tw[0, p] * si
+
+
 @njit(cache=True)
 def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
-    """F = right-hand side of the state without the linear mode decay −e_n/τ_n.
+    """:func:`nonlinear_part_at` with the phasor phases computed here, for any quaternion norm: the
+    attitude is that of q/|q| and the kinematics F[3:7] = ½ q ⊗ (0, Ω_b) use q itself (a stage value
+    off the unit sphere of a plain RK, or of the NumPy baseline, is treated alike)."""
+    cs = np.empty(om.shape[0])
+    sn = np.empty(om.shape[0])
+    phasor_trig(s, om, cs, sn)
+    nq = math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+    yu = y.copy()
+    for i in range(3, 7):
+        yu[i] /= nq
+    nonlinear_part_at(cs, sn, s, yu, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
+    for i in range(3, 7):
+        F[i] *= nq
+
+
+@njit(cache=True, inline="always")
+def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
+    """F = right-hand side of the state without the linear mode decay −e_n/τ_n, for a unit quaternion y[3:7].
+
+    ``cs``, ``sn``: cos(ω_p s), sin(ω_p s) of each phasor (the steppers get them by angle addition
+    from one evaluation per step: see :func:`stage_trig`).
 
     F[0:3] = N (case, N·m) = (R m_b) × B  with m_b = c (Σ w_n e_n − T_tail dB_b/dt)   [physics.md §3]
     F[3:7] = ½ q ⊗ (0, Ω_b),  Ω_b = J⁻¹ Rᵀ L
@@ -124,26 +171,26 @@ def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
     dBx = dBy = dBz = 0.0
     ddx = ddy = ddz = 0.0
     for p in range(om.shape[0]):
-        c = math.cos(om[p] * s)
-        sn = math.sin(om[p] * s)
-        bx = Bre[p, 0] * c + Bim[p, 0] * sn
-        by = Bre[p, 1] * c + Bim[p, 1] * sn
-        bz = Bre[p, 2] * c + Bim[p, 2] * sn
+        c = cs[p]
+        si = sn[p]
+        bx = Bre[p, 0] * c + Bim[p, 0] * si
+        by = Bre[p, 1] * c + Bim[p, 1] * si
+        bz = Bre[p, 2] * c + Bim[p, 2] * si
         Bx += bx
         By += by
         Bz += bz
-        dBx += om[p] * (Bim[p, 0] * c - Bre[p, 0] * sn)
-        dBy += om[p] * (Bim[p, 1] * c - Bre[p, 1] * sn)
-        dBz += om[p] * (Bim[p, 2] * c - Bre[p, 2] * sn)
+        dBx += om[p] * (Bim[p, 0] * c - Bre[p, 0] * si)
+        dBy += om[p] * (Bim[p, 1] * c - Bre[p, 1] * si)
+        dBz += om[p] * (Bim[p, 2] * c - Bre[p, 2] * si)
         if mag:
             o2 = om[p] * om[p]
             ddx -= o2 * bx
             ddy -= o2 * by
             ddz -= o2 * bz
-    # stage quaternions are not unit: the attitude is that of q/|q|; Rᵀ is the conjugate's rotation
+    # q is a unit quaternion (the steppers' stage attitudes are q_n ⊗ cay(u) or q_n ⊗ exp(u));
+    # Rᵀ is the conjugate's rotation
     q0, q1, q2, q3 = y[3], y[4], y[5], y[6]
-    inv_n = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-    w0, x0, y0, z0 = q0 * inv_n, q1 * inv_n, q2 * inv_n, q3 * inv_n
+    w0, x0, y0, z0 = q0, q1, q2, q3
     Lbx, Lby, Lbz = _rotl(w0, -x0, -y0, -z0, y[0], y[1], y[2])
     k0 = 7 + 3 * nm
     t_abs = s
@@ -312,7 +359,8 @@ def _q_cay(q, u0, u1, u2, out):
 
 
 @njit(cache=True)
-def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work, K, eff):
+def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work, K, eff,
+                 tab, tw):
     """One step of ETDRK4 with the attitude advanced on the rotation group (RKMK4, in place on y).
 
     L and the eddy modes take the Cox–Matthews ETDRK4 step; the quaternion is q_n ⊗ exp(u) with u
@@ -330,26 +378,30 @@ def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2
     cc = buf[6]
     # K[0:12]: the stage increments K1..K4 (rad/s); K[12:16] scratch
     q0 = y[3:7]
-    nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work, eff)
+    # tab: the phase advances to s + h/2 and s + h (stages 1, 2 of the table), tw[0:2] the phases at s
+    phasor_trig(s, om, tw[0], tw[1])
+    nonlinear_part_at(tw[0], tw[1], s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work, eff)
+    _stage_trig(1, tab, tw)
     K[0] = work[12]
     K[1] = work[13]
     K[2] = work[14]
     for i in range(n):
         a[i] = E2[i] * y[i] + Q[i] * Nu[i]
     _q_exp(q0, 0.5 * h * K[0], 0.5 * h * K[1], 0.5 * h * K[2], a[3:7])
-    nonlinear_part(s + 0.5 * h, a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work, eff)
+    nonlinear_part_at(tw[2], tw[3], s + 0.5 * h, a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work, eff)
     _dexpinv(0.5 * h * K[0], 0.5 * h * K[1], 0.5 * h * K[2],
              work[12], work[13], work[14], K[3:6])
     for i in range(n):
         b[i] = E2[i] * y[i] + Q[i] * Na[i]
     _q_exp(q0, 0.5 * h * K[3], 0.5 * h * K[4], 0.5 * h * K[5], b[3:7])
-    nonlinear_part(s + 0.5 * h, b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work, eff)
+    nonlinear_part_at(tw[2], tw[3], s + 0.5 * h, b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work, eff)
     _dexpinv(0.5 * h * K[3], 0.5 * h * K[4], 0.5 * h * K[5],
              work[12], work[13], work[14], K[6:9])
     for i in range(n):
         cc[i] = E2[i] * a[i] + Q[i] * (2.0 * Nb[i] - Nu[i])
     _q_exp(q0, h * K[6], h * K[7], h * K[8], cc[3:7])
-    nonlinear_part(s + h, cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work, eff)
+    _stage_trig(2, tab, tw)
+    nonlinear_part_at(tw[2], tw[3], s + h, cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work, eff)
     _dexpinv(h * K[6], h * K[7], h * K[8], work[12], work[13], work[14], K[9:12])
     u0 = h / 6.0 * (K[0] + 2.0 * K[3] + 2.0 * K[6] + K[9])
     u1 = h / 6.0 * (K[1] + 2.0 * K[4] + 2.0 * K[7] + K[10])
@@ -502,70 +554,83 @@ def dop853_tableau() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def lawson_coefficients(lam, h, c, E0, EC, EB, Eh):
-    """Integrating factors of a step h: E0[i,k] = e^{c_i h λ_k}, EC[i,j,k] = e^{(c_i − c_j) h λ_k},
-    EB[j,k] = e^{(1 − c_j) h λ_k}, Eh[k] = e^{h λ_k}."""
+def nonzero_columns(A):
+    """(cols, count): the columns j < i with A[i, j] ≠ 0 of each row i (DOP853's A is about half zeros)."""
+    S = A.shape[0]
+    cols = np.zeros((S, max(S, 1)), dtype=np.int64)
+    count = np.zeros(S, dtype=np.int64)
+    for i in range(S):
+        for j in range(i):
+            if A[i, j] != 0.0:
+                cols[i, count[i]] = j
+                count[i] += 1
+    return cols, count
+
+
+@njit(cache=True)
+def lawson_coefficients(lam, h, A, b, c, E0, W, WB, Eh):
+    """Weights of a Lawson step h with the integrating factors folded in (λ_k = 0 gives the plain tableau):
+    E0[i,k] = e^{c_i h λ_k}, W[i,j,k] = h A[i,j] e^{(c_i − c_j) h λ_k}, WB[j,k] = h b_j e^{(1 − c_j) h λ_k},
+    Eh[k] = e^{h λ_k}."""
     S = c.shape[0]
     for k in range(lam.shape[0]):
         Eh[k] = math.exp(lam[k] * h)
         for i in range(S):
             E0[i, k] = math.exp(c[i] * h * lam[k])
-            EB[i, k] = math.exp((1.0 - c[i]) * h * lam[k])
+            WB[i, k] = h * b[i] * math.exp((1.0 - c[i]) * h * lam[k])
             for j in range(i):
-                EC[i, j, k] = math.exp((c[i] - c[j]) * h * lam[k])
+                W[i, j, k] = h * A[i, j] * math.exp((c[i] - c[j]) * h * lam[k])
 
 
 @njit(cache=True)
-def lawson_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c, E0, EC, EB, Eh, Fs, Ys, Ks, work,
-                    qn, eff):
+def lawson_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c, cols, count, E0, W, WB, Eh, Fs, Ys, Ks,
+                    work, qn, eff, tab, tw):
     """One step of a Lawson RK (tableau A, b, c) for L and the eddy modes, RKMK on the attitude (in place).
 
     With v = e^{−λt} y the linear decay of the modes is exact and the tableau integrates the rest, so
     the method keeps the tableau's order where h/τ_n is moderate (the thin shell); the attitude is
     q_n ⊗ cay(u), u from the same tableau applied to u' = dcay⁻¹(Ω_b) (Munthe-Kaas with the Cayley
-    map: exact as exp, and free of trigonometric functions).
+    map: exact as exp, and free of trigonometric functions). The field's phases: one cos and sin per
+    phasor at the step's start, the stages' by angle addition (``tab`` from :func:`stage_trig_table`).
+    Weights W, WB from :func:`lawson_coefficients`; only the nonzero A[i, j] (``cols``, ``count``) are
+    visited. The quaternion slots of the sums are computed and overwritten (one loop over all k).
     """
     n = y.shape[0]
     S = c.shape[0]
     for k in range(4):
         qn[k] = y[3 + k]
+    phasor_trig(s, om, tw[0], tw[1])
     for i in range(S):
-        for k in range(3):  # L: no linear part
-            acc = 0.0
-            for j in range(i):
-                acc += A[i, j] * Fs[j, k]
-            Ys[k] = y[k] + h * acc
-        for k in range(7, n):
-            acc = 0.0
-            for j in range(i):
-                acc += A[i, j] * EC[i, j, k] * Fs[j, k]
-            Ys[k] = E0[i, k] * y[k] + h * acc
+        for k in range(n):
+            Ys[k] = E0[i, k] * y[k]
         u0 = u1 = u2 = 0.0
-        for j in range(i):
-            u0 += A[i, j] * Ks[j, 0]
-            u1 += A[i, j] * Ks[j, 1]
-            u2 += A[i, j] * Ks[j, 2]
+        for jj in range(count[i]):
+            j = cols[i, jj]
+            for k in range(n):
+                Ys[k] += W[i, j, k] * Fs[j, k]
+            a = A[i, j]
+            u0 += a * Ks[j, 0]
+            u1 += a * Ks[j, 1]
+            u2 += a * Ks[j, 2]
         u0 *= h
         u1 *= h
         u2 *= h
         _q_cay(qn, u0, u1, u2, Ys[3:7])
-        nonlinear_part(s + c[i] * h, Ys, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[i], work, eff)
+        _stage_trig(i, tab, tw)
+        nonlinear_part_at(tw[2], tw[3], s + c[i] * h, Ys, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[i], work, eff)
         _dcayinv(u0, u1, u2, work[12], work[13], work[14], Ks[i])
     for k in range(n):
-        if 3 <= k <= 6:
-            continue
-        acc = 0.0
-        for j in range(S):
-            acc += b[j] * EB[j, k] * Fs[j, k]
-        y[k] = Eh[k] * y[k] + h * acc
+        y[k] *= Eh[k]
     u0 = u1 = u2 = 0.0
     for j in range(S):
+        if b[j] == 0.0:
+            continue
+        for k in range(n):
+            y[k] += WB[j, k] * Fs[j, k]
         u0 += b[j] * Ks[j, 0]
         u1 += b[j] * Ks[j, 1]
         u2 += b[j] * Ks[j, 2]
-    _q_cay(qn, h * u0, h * u1, h * u2, Ys[3:7])
-    for k in range(4):
-        y[3 + k] = Ys[3 + k]
+    _q_cay(qn, h * u0, h * u1, h * u2, y[3:7])
     _normalize_q(y)
 
 
@@ -586,8 +651,9 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
     S = c.shape[0]
     # Lawson: integrating factors, stage derivatives and states
     E0 = np.empty((S, n))
-    EC = np.zeros((S, S, n))
-    EB = np.empty((S, n))
+    W = np.zeros((S, S, n))
+    WB = np.empty((S, n))
+    cols, count = nonzero_columns(A)
     Eh = np.empty(n)
     Fs = np.empty((max(S, 1), n))
     Ys = np.empty(n)
@@ -603,6 +669,10 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
     A2 = np.empty(n)
     A3 = np.empty(n)
     work = np.empty(25)
+    # the phase advance of each phasor to each stage (ETDRK4: s, s + h/2, s + h), and phases now
+    c_trig = c if lawson else np.array([0.0, 0.5, 1.0])
+    tab = np.empty((c_trig.shape[0], 2, om.shape[0]))
+    tw = np.empty((4, om.shape[0]))
     h_last = -1.0
     steps = 0
     t = t0
@@ -612,22 +682,24 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
             k, h = _equal_steps(span, h_max)
             if h != h_last:
                 if lawson:
-                    lawson_coefficients(lam, h, c, E0, EC, EB, Eh)
+                    lawson_coefficients(lam, h, A, b, c, E0, W, WB, Eh)
                 else:
                     etd_coefficients(lam, h, E, E2, Q, A1, A2, A3)
+                stage_trig_table(om, c_trig, h, tab)
                 h_last = h
             for j in range(k):
                 if lawson:
                     lawson_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c,
-                                    E0, EC, EB, Eh, Fs, Ys, Ks, work, qn, eff)
+                                    cols, count, E0, W, WB, Eh, Fs, Ys, Ks, work, qn, eff, tab, tw)
                 else:
                     etd_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
-                                 E, E2, Q, A1, A2, A3, buf, work, K, eff)
+                                 E, E2, Q, A1, A2, A3, buf, work, K, eff, tab, tw)
             steps += k
             t = t_stops[i]
         if record[i]:
             out_y[k_out, :] = y
-            nonlinear_part(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[0], work, eff)
+            phasor_trig(t - t_seg, om, tw[0], tw[1])
+            nonlinear_part_at(tw[0], tw[1], t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[0], work, eff)
             out_N[k_out, 0] = Fs[0, 0]
             out_N[k_out, 1] = Fs[0, 1]
             out_N[k_out, 2] = Fs[0, 2]
