@@ -49,7 +49,6 @@ class RunResult:
     L: np.ndarray  # (n,3) N·m·s, case frame
     q: np.ndarray  # (n,4) quaternion (w,x,y,z) body → case
     omega_b: np.ndarray  # (n,3) rad/s, body frame
-    euler: np.ndarray  # (n,3) ψ, θ, φ rad (body in the L-frame)
     torque: np.ndarray  # (n,3) N·m, case frame (electrodynamic)
     energy: np.ndarray  # (n,) J, rotational kinetic energy
     stator_names: list[str]
@@ -63,6 +62,15 @@ class RunResult:
     averaged_segments: list = field(default_factory=list)  # (t0, t1) s run with the averaged model
     averaged_rhs_evaluations: int = 0
     effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
+    _euler: Optional[np.ndarray] = field(default=None, repr=False)
+
+    @property
+    def euler(self) -> np.ndarray:
+        """(n,3) ψ, θ, φ rad (body in the L-frame): computed from L and q when first read (a run whose
+        Euler angles no one reads does no Euler-angle work)."""
+        if self._euler is None:
+            self._euler = euler_angles(quat_to_matrix(self.q), self.L)
+        return self._euler
 
     @property
     def spin_rate(self) -> np.ndarray:
@@ -368,12 +376,9 @@ def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray,
     return Lb, Lb / J
 
 
-def derived_outputs(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Body angular velocity (rad/s), Euler angles (rad) and kinetic energy (J) of states."""
-    R = quat_to_matrix(q)
-    Lb, omega_b = body_rates(J, L, q)
-    energy = 0.5 * np.einsum("ni,ni->n", Lb, omega_b)
-    return omega_b, euler_angles(R, L), energy
+def kinetic_energy(J: np.ndarray, omega_b: np.ndarray) -> np.ndarray:
+    """Rotational kinetic energy ½ Ω_b·J Ω_b (J) of body rates (..., 3) rad/s."""
+    return 0.5 * np.einsum("ni,i,ni->n", omega_b, J, omega_b)
 
 
 class Runner:
@@ -546,25 +551,27 @@ class Runner:
         self.advance()  # to the break, sampled
         return slice(first, self.row)
 
-    def samples(self, rows: slice) -> dict:
-        """Output rows as arrays: t, L, q, omega_b, euler, torque, energy, current, rate, phase."""
+    def samples(self, rows: slice, euler: bool = True) -> dict:
+        """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current,
+        rate, phase."""
         L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
         extra = {}
         if self.sim.eff[effects.ON]:
             t = self.t_out[rows]
             omega_b = self.sim.body_rates(t, self.out_y[rows])
-            eul = euler_angles(quat_to_matrix(q), L)
-            energy = 0.5 * np.einsum("ni,i,ni->n", omega_b, self.sim.J, omega_b)  # the rigid body's own
+            energy = kinetic_energy(self.sim.J, omega_b)  # the rigid body's own
             extra = self.sim.effect_outputs(t, self.out_y[rows])
         else:
-            omega_b, eul, energy = derived_outputs(self.sim.J, L, q)
+            _, omega_b = body_rates(self.sim.J, L, q)
+            energy = kinetic_energy(self.sim.J, omega_b)
+        eul = euler_angles(quat_to_matrix(q), L) if euler else None
         return {"t": self.t_out[rows], "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
                 "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
                 "effects": extra}
 
     def result(self) -> RunResult:
-        s = self.samples(slice(0, self.row))
-        return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"], euler=s["euler"],
+        s = self.samples(slice(0, self.row), euler=False)
+        return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"],
                          torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
                          current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
                          modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
