@@ -297,6 +297,15 @@ class AveragedM:
         """The body-frame frequencies (rad/s) at which ĝ enters the equations."""
         raise NotImplementedError  # pragma: no cover
 
+    def small_theta_rate(self, L, rho) -> float:
+        """(1/θ) dθ/dt (1/s) at θ → 0, for |L| (N·m·s) and ρ (rad)."""
+        raise NotImplementedError  # pragma: no cover
+
+    def nutation_decays(self, L, rho=0.0) -> bool:
+        """θ decays at small θ: the criterion [M] (3.11) (constant field), (3.15) (pulsating), (3.18) at
+        ρ = 0 (rotating), each as the sign of :meth:`small_theta_rate`."""
+        return self.small_theta_rate(L, rho) < 0.0
+
     def torque_frequencies(self, L) -> np.ndarray:
         """Frequencies (rad/s, > 0) of the fast harmonics of the case-frame torque projections.
 
@@ -411,10 +420,6 @@ class ConstantFieldM(AveragedM):
         br = 0.5 * math.sin(rho) ** 2 * (self.a2(l) - self.a2(l / (1 + k))) + math.cos(rho) ** 2 * self.a2(k * l / (1 + k))
         return -self.B0**2 * br / L  # [M] (3.10)
 
-    def nutation_decays(self, L, rho) -> bool:
-        """[M] (3.11)."""
-        return self.small_theta_rate(L, rho) < 0.0
-
 
 class PulsatingFieldM(AveragedM):
     """[M] (3.14) with (3.7): field B0 sin(ωt) z3."""
@@ -438,10 +443,6 @@ class PulsatingFieldM(AveragedM):
         br = (0.5 * math.sin(rho) ** 2 * (a2(l1 - w) + a2(l1 + w) - a2(l - w) - a2(l + w))
               + math.cos(rho) ** 2 * (a2(-n - w) + a2(-n + w)))  # left side of [M] (3.15)
         return self.B0**2 * br / (4.0 * L)
-
-    def nutation_decays(self, L, rho) -> bool:
-        """[M] (3.15)."""
-        return self.small_theta_rate(L, rho) < 0.0
 
 
 class RotatingFieldM(AveragedM):
@@ -472,9 +473,6 @@ class RotatingFieldM(AveragedM):
         """[M] (3.18) (ρ = 0) through closed_forms.small_theta_nutation_rate (same ĝ)."""
         return float(small_theta_nutation_rate(self.g, self.r2, self.B0, self.J1, self.J3, L, self.omega))
 
-    def nutation_decays(self, L, rho=0.0) -> bool:
-        """θ decays at small θ ((3.18) at ρ = 0)."""
-        return self.small_theta_rate(L, rho) < 0.0
 
     def thin_shell_window(self, tau):
         """[M] (3.19)–(3.20) for a thin shell of time constant τ (s): closed_forms.thin_shell_nutation_window."""
