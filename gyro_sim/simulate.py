@@ -377,7 +377,7 @@ def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray,
 
 
 def kinetic_energy(J: np.ndarray, omega_b: np.ndarray) -> np.ndarray:
-    """Rotational kinetic energy ½ Ω_b·J Ω_b (J) of body rates (..., 3) rad/s."""
+    """Rotational kinetic energy ½ Ω_b·J Ω_b (J) of body rates (n, 3) rad/s, J the principal moments (kg·m²)."""
     return 0.5 * np.einsum("ni,i,ni->n", omega_b, J, omega_b)
 
 
