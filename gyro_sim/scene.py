@@ -38,9 +38,13 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     duration: 60.0                   # s
     output: {rate: 100.0}            # samples per second of simulated time
     integrator:
-      method: auto                   # lawson8 | etdrk4 | auto: lawson8 unless an eddy mode is stiff (h > 2τ_n)
-      steps_per_turn: null           # steps per period of the fastest rotation (spin or field);
-                                     # default 12 for lawson8, 48 for etdrk4
+      method: auto                   # lawson8 | etdrk4 | frozen_flow | auto: lawson8 unless an eddy mode is
+                                     # stiff (h > 2τ_n); frozen_flow: steps longer than a field turn
+                                     # (axisymmetric rotor, no effects; gyro_sim/frozen_flow.py)
+      steps_per_turn: null           # lawson8/etdrk4: steps per period of the fastest rotation (spin or
+                                     # field); default 12 for lawson8, 48 for etdrk4
+      rate_change: null              # frozen_flow: largest change of the body rate per step as a fraction
+                                     # of the fastest rate, by the torque's scale (default 1e-4)
       max_step: null                 # optional upper bound on the step, s
     controller:                      # optional: a law of gyro_ctl run every period (s)
       law: psi_switching             # spinup | psi_switching
@@ -185,8 +189,9 @@ class Output(_Strict):
 
 
 class Integrator(_Strict):
-    method: Literal["auto", "lawson8", "etdrk4"] = "auto"
+    method: Literal["auto", "lawson8", "etdrk4", "frozen_flow"] = "auto"
     steps_per_turn: Optional[Annotated[int, Field(ge=4, le=100000)]] = None  # default: 12 (lawson8), 48 (etdrk4)
+    rate_change: Optional[Annotated[float, Field(gt=0.0, le=0.1)]] = None  # frozen_flow; default 1e-4
     max_step: Optional[Positive] = None
 
 
@@ -229,6 +234,19 @@ class Scene(_Strict):
                     raise ValueError(
                         f"controller.params: stator {n!r} is not defined; allowed: {names or 'none defined'}"
                     )
+        if self.integrator.method == "frozen_flow":
+            J = self.rotor.inertia
+            if not (J[0] == J[1] or J[1] == J[2] or J[0] == J[2]):
+                raise ValueError(
+                    f"integrator.method = 'frozen_flow' needs an axisymmetric rotor (two equal rotor.inertia); "
+                    f"rotor.inertia = {list(J)}: use lawson8, etdrk4 or auto"
+                )
+            if self.effects.any:
+                on = [k for k in type(self.effects).model_fields if getattr(self.effects, k) is not None]
+                raise ValueError(
+                    f"integrator.method = 'frozen_flow' takes the electrodynamic torque only; effects {on} are on: "
+                    f"use lawson8, etdrk4 or auto"
+                )
         if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:
             raise ValueError(
                 f"torque_model = {self.torque_model!r} needs rotor.conductor; add one or set torque_model: none"

@@ -13,7 +13,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from . import effects, kernels
+from . import effects, frozen_flow, kernels
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
@@ -24,6 +24,9 @@ __all__ = ["Simulator", "RunResult", "run", "stator_triad"]
 #: steps per turn of the fastest rotation when the scene gives none: both give L to ~1e-7 over the
 #: default scene's 2 s (docs/benchmark.md); lawson8 at about a quarter of etdrk4's cost
 DEFAULT_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
+#: frozen_flow: the body rate may change by this fraction of the fastest rate per step (by the torque's
+#: scale): 1e-4 gives ~1e-6 in (L, q) over the default scene's 2 s (docs/numerics.md)
+DEFAULT_RATE_CHANGE = 1e-4
 #: (A, b, c) of each field stepper for kernels.integrate: DOP853's for lawson8, empty for ETDRK4
 _TABLEAU = {"lawson8": kernels.dop853_tableau(), "etdrk4": (np.empty((0, 0)), np.empty(0), np.empty(0))}
 
@@ -240,6 +243,8 @@ class Simulator:
         if free:
             return "free", self._max_step(True, "free")
         m = self.scene.integrator.method
+        if m == "frozen_flow":
+            return m, self._frozen_flow_step()
         if m == "auto":
             h = self._max_step(False, "lawson8")
             if self.tau.size == 0 or h <= 2.0 * float(np.min(self.tau)):
@@ -266,6 +271,21 @@ class Simulator:
             om = max(L * np.max(self.Jinv), self._nu_max, float(np.max(self.field_om, initial=0.0)),
                      self._effect_rate())
             h = 2 * math.pi / (spt * om) if om > 0 else math.inf
+        if self.scene.integrator.max_step is not None:
+            h = min(h, self.scene.integrator.max_step)
+        return h
+
+    def _frozen_flow_step(self) -> float:
+        """Largest frozen-flow step (s): the body rate may change by ``rate_change`` of the fastest rate Ω
+        (spin or field) per step at the torque's scale N = c|B|²(½Σ|w_n| + T_tail(Ω + ν_max)), the largest
+        |m||B| the conductor gives at a slip up to Ω + ν_max (J_min Ω ε / N)."""
+        eps = self.scene.integrator.rate_change or DEFAULT_RATE_CHANGE
+        Bre, Bim, _ = self.phasors()
+        B = float(np.sum(np.sqrt(np.sum(Bre ** 2, axis=1) + np.sum(Bim ** 2, axis=1))))
+        om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
+                 float(np.max(np.abs(self.field_om), initial=0.0)))
+        N = self.c_m * B * B * (0.5 * float(np.sum(np.abs(self.w))) + self.tail * (om + self._nu_max))
+        h = eps * float(np.min(self.J)) * om / N if N > 0 and om > 0 else math.inf
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
         return h
@@ -311,7 +331,12 @@ class Simulator:
         method, h_max = self._step_plan(free)
         if not math.isfinite(h_max):
             h_max = max(t_end - self.t, 1e-300)
-        if free:
+        if method == "frozen_flow":
+            ax = frozen_flow.supported(self.J)
+            k_out, steps = frozen_flow.integrate_frozen(
+                self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
+                self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff)
+        elif free:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
                 out_y, out_N, k_out)
