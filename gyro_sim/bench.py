@@ -61,8 +61,21 @@ __all__ = [
 DEFAULT_SCENES = ("spinup_thin_shell", "spinup_solid_sphere")
 TARGET_ERROR = 1e-6
 OURS = "gyro_sim"  # method label prefix of the project's integrator
-STAGES = {"lawson8": 12, "etdrk4": 4}  # right-hand-side evaluations per step
-ORDER = {"lawson8": 8, "etdrk4": 4}
+#: right-hand-side evaluations per step (frozen_flow: its two closed-form passes)
+STAGES = {"lawson8": 12, "etdrk4": 4, "frozen_flow": 2}
+ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2}
+#: the accuracy knob of each stepper (integrator.<knob>) and its sweep; steps_per_turn's from BenchConfig
+RATE_CHANGES = (3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
+
+
+def knob_of(method: str) -> str:
+    """The ``integrator`` field that sets the accuracy of a stepper."""
+    return "rate_change" if method == "frozen_flow" else "steps_per_turn"
+
+
+def refined(method: str, value: float) -> float:
+    """The knob's value that halves the step."""
+    return value / 2 if knob_of(method) == "rate_change" else 2 * value
 BASELINES = ("DOP853", "LSODA")
 
 
@@ -216,9 +229,10 @@ def fidelity_levels() -> list[str]:
 
 def ours_levels() -> list[str]:
     """What the work-precision table runs of ours: every fidelity level, and the full model once more
-    with its other stepper forced (``full/etdrk4``; ``full`` itself picks lawson8 where no mode is stiff)."""
+    with each stepper forced (``full/lawson8``, ``full/etdrk4``; ``full`` itself picks by the scene:
+    ``integrator.method: auto``)."""
     levels = fidelity_levels()
-    return levels[:1] + ["full/etdrk4"] + levels[1:]
+    return levels[:1] + ["full/lawson8", "full/etdrk4"] + levels[1:]
 
 
 def _method_label(level: str) -> str:
@@ -243,10 +257,8 @@ def _timed(fn: Callable, min_wall: float = 0.0, max_reps: int = 1):
             return best[0], best[1], out
 
 
-def _scene_overrides(spt: Optional[int], level: str, extra: Optional[dict]) -> dict:
+def _scene_overrides(level: str, extra: Optional[dict]) -> dict:
     ov: dict = {"controller": None}
-    if spt is not None:
-        ov["integrator.steps_per_turn"] = int(spt)
     if level.startswith("full/"):
         ov["integrator.method"] = level.split("/", 1)[1]
     elif level != "full":
@@ -255,25 +267,40 @@ def _scene_overrides(spt: Optional[int], level: str, extra: Optional[dict]) -> d
     return ov
 
 
-def run_ours(scene_name: str, horizon: float, spt: Optional[int] = None, level: str = "full",
+def level_method(scene_name: str, level: str = "full", extra: Optional[dict] = None) -> str:
+    """The stepper a level starts the scene with (``Simulator._method``)."""
+    from .scene import load_scene
+    from .simulate import Simulator
+
+    return Simulator(load_scene(scene_name, overrides=_scene_overrides(level, extra)))._method()
+
+
+def run_ours(scene_name: str, horizon: float, value: Optional[float] = None, level: str = "full",
              extra: Optional[dict] = None, min_wall: float = 0.0, max_reps: int = 1) -> Row:
     """``gyro_sim.run`` of the scene (controller removed) over ``horizon`` s; wall includes setup.
+    ``value``: the accuracy knob of the stepper the level starts with (:func:`knob_of`; None: the default).
 
-    RHS evaluations of the full level: 12 per lawson8 step or 4 per ETDRK4 step (the stepper the run
-    starts with) + 1 per output sample (the torque).
+    RHS evaluations of the full level: 12 per lawson8 step, 4 per ETDRK4 step, 2 per frozen-flow step
+    (the stepper the run starts with) + 1 per output sample (the torque).
     """
     from .scene import load_scene
-    from .simulate import DEFAULT_STEPS_PER_TURN, Simulator, run
+    from .simulate import DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN, run
 
-    scene = load_scene(scene_name, overrides=_scene_overrides(spt, level, extra))
-    method = Simulator(scene)._method()
+    method = level_method(scene_name, level, extra)
+    knob = knob_of(method)
+    ov = _scene_overrides(level, extra)
+    if value is not None:
+        ov[f"integrator.{knob}"] = int(value) if knob == "steps_per_turn" else float(value)
+    scene = load_scene(scene_name, overrides=ov)
     wall, cpu, res = _timed(lambda: run(scene, duration=horizon), min_wall, max_reps)
     steps = int(res.steps)
     # per step + 1 per output sample; an averaged stretch adds its own (solve_ivp) count
     rhs = STAGES[method] * steps + int(res.t.size) + int(getattr(res, "averaged_rhs_evaluations", 0) or 0)
     segments = getattr(res, "averaged_segments", None) or []
-    value = float(spt if spt is not None else (scene.integrator.steps_per_turn or DEFAULT_STEPS_PER_TURN[method]))
-    return Row(scene_name, horizon, _method_label(level), "steps_per_turn", value, wall, steps, int(rhs),
+    if value is None:
+        value = getattr(scene.integrator, knob) or (DEFAULT_RATE_CHANGE if knob == "rate_change"
+                                                    else DEFAULT_STEPS_PER_TURN[method])
+    return Row(scene_name, horizon, _method_label(level), knob, float(value), wall, steps, int(rhs),
                L=res.L[-1].copy(), q=res.q[-1].copy(), averaged=float(sum(t1 - t0 for t0, t1 in segments)),
                cpu=cpu)
 
@@ -295,7 +322,7 @@ def run_baseline(scene_name: str, horizon: float, method: str, rtol: float, L_sc
     """
     from .scene import load_scene
 
-    scene = load_scene(scene_name, overrides=_scene_overrides(None, "full", extra))
+    scene = load_scene(scene_name, overrides=_scene_overrides("full", extra))
     wall, cpu, (sim, nfev, steps) = _timed(lambda: _baseline_once(scene, horizon, method, rtol, L_scale),
                                            min_wall, max_reps)
     return Row(scene_name, horizon, f"solve_ivp {method}", "rtol", rtol, wall, steps, nfev,
@@ -387,6 +414,7 @@ class BenchConfig:
     horizon: dict = field(default_factory=dict)  # scene → horizon of the comparison (all methods)
     default_horizon: float = 0.2
     steps_per_turn: tuple = (6, 12, 24, 48, 96, 192, 384, 768)
+    rate_changes: tuple = RATE_CHANGES
     spt_ref: int = 3072
     rtols: tuple = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
     rtol_ref: float = 1e-12
@@ -459,12 +487,12 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
     """Every method on one scene and horizon against one converged reference; fills res.rows."""
     cfg = res.config
     spt_ref = spt_ref or cfg.spt_ref
-    _say(f"[{scene}, {horizon:g} s] reference: {OURS} full, steps_per_turn={spt_ref}")
-    ref = run_ours(scene, horizon, spt_ref)
+    _say(f"[{scene}, {horizon:g} s] reference: {OURS} full/lawson8, steps_per_turn={spt_ref}")
+    ref = run_ours(scene, horizon, spt_ref, "full/lawson8")
     ref.note = "reference"
     L_ref, q_ref = ref.L, ref.q
     L_scale = float(np.linalg.norm(L_ref)) or 1.0
-    ref_info = {"scene": scene, "horizon": horizon, "reference": f"{OURS} full, steps_per_turn={spt_ref}",
+    ref_info = {"scene": scene, "horizon": horizon, "reference": f"{OURS} full/lawson8, steps_per_turn={spt_ref}",
                 "check": "", "agreement": float("nan"), "ref_cpu": ref.cpu, "check_cpu": float("nan")}
     if with_baselines and cfg.rtol_ref:
         chk = run_baseline(scene, horizon, "DOP853", cfg.rtol_ref, L_scale)
@@ -474,9 +502,15 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
     res.refs.append(ref_info)
     rows: list[Row] = []
     for level in ours_levels():
-        for spt in cfg.steps_per_turn:
+        try:
+            method = level_method(scene, level)
+        except Exception as exc:  # a level that does not apply to this scene
+            res.notes.append(f"{scene}: {_method_label(level)} skipped: {exc}".splitlines()[0])
+            _say(f"    {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
+            continue
+        for value in (cfg.rate_changes if knob_of(method) == "rate_change" else cfg.steps_per_turn):
             try:
-                r = run_ours(scene, horizon, spt, level, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+                r = run_ours(scene, horizon, value, level, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
             except Exception as exc:  # a level that does not apply to this scene
                 res.notes.append(f"{scene}: {_method_label(level)} skipped: {exc}".splitlines()[0])
                 _say(f"    {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
@@ -519,18 +553,18 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
 
 
 def mode_cost(res: Results) -> None:
-    """Our integrator on the solid sphere with 1 and 50 modes (default steps_per_turn); baseline too."""
+    """Our integrator on the solid sphere with 1 and 50 modes (ETDRK4 and frozen_flow at their default knobs);
+    the baseline too."""
     cfg = res.config
     scene, T = cfg.mode_scene, cfg.mode_horizon
-    out = {}
-    for n in cfg.mode_counts:
-        r = run_ours(scene, T, None, "full/etdrk4", {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
-        out[n] = r
-        res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting, "horizon": T,
-                          "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs, "rtf": r.rtf,
-                          "ns_per_step": 1e9 * r.cpu / max(r.steps, 1)})
-        _say(f"[modes] {scene} modes={n}: cpu {r.cpu:.4f} s, wall {r.wall:.4f} s, steps {r.steps}, "
-             f"{r.rtf:.1f}x real time")
+    for level in ("full/etdrk4", "full/frozen_flow"):
+        for n in cfg.mode_counts:
+            r = run_ours(scene, T, None, level, {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+            res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting, "horizon": T,
+                              "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs, "rtf": r.rtf,
+                              "ns_per_step": 1e9 * r.cpu / max(r.steps, 1)})
+            _say(f"[modes] {scene} {r.method} modes={n}: cpu {r.cpu:.4f} s, wall {r.wall:.4f} s, steps {r.steps}, "
+                 f"{r.rtf:.1f}x real time")
     if cfg.mode_baseline_horizon:
         Tb = cfg.mode_baseline_horizon
         for method in cfg.baselines:
@@ -580,27 +614,31 @@ def realtime_factor(res: Results) -> None:
 def long_spinup(res: Results) -> None:
     """20-minute spin-up of the default scene without its controller, at each fidelity level.
 
-    Error estimate of the default steps_per_turn from the run at twice as many steps (order p of the
-    stepper: err(h) ≈ |y(h) − y(h/2)| · 2^p/(2^p − 1)); other levels against the run at twice the steps (of L alone
-    where they averaged the spin phase out).
+    Error estimate of the full model at its default knob from the run at half the step (order p of the
+    stepper: err(h) ≈ |y(h) − y(h/2)| · 2^p/(2^p − 1)); other levels against the run at half the step (of L
+    alone where they averaged the spin phase out).
     """
     from .scene import load_scene
-    from .simulate import DEFAULT_STEPS_PER_TURN, Simulator, run
+    from .simulate import DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN, Simulator, run
 
     cfg = res.config
     T = cfg.spinup_duration
     base = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None})
-    spt0 = base.integrator.steps_per_turn or DEFAULT_STEPS_PER_TURN[Simulator(base)._method()]
+    method = Simulator(base)._method()
+    knob = knob_of(method)
+    v0 = getattr(base.integrator, knob) or (DEFAULT_RATE_CHANGE if knob == "rate_change"
+                                            else DEFAULT_STEPS_PER_TURN[method])
+    v1 = refined(method, v0)
     runs = {}
-    for spt in (spt0, 2 * spt0):
+    for v in (v0, v1):
         sc = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None,
-                                                        "integrator.steps_per_turn": spt})
+                                                        f"integrator.{knob}": v})
         wall, cpu, r = _timed(lambda: run(sc), 0.0, 1)
-        runs[spt] = (wall, cpu, r)
-        _say(f"[spin-up {T:g} s] {_method_label('full')} steps_per_turn={spt}: wall {wall:.1f} s, cpu {cpu:.1f} s, "
+        runs[v] = (wall, cpu, r)
+        _say(f"[spin-up {T:g} s] {_method_label('full')} {knob}={v:g}: wall {wall:.2f} s, cpu {cpu:.2f} s, "
              f"steps {r.steps}, "
              f"spin {r.spin_rate[-1] / (2 * math.pi):.2f} rev/s")
-    (w1, c1, r1), (w2, c2, r2) = runs[spt0], runs[2 * spt0]
+    (w1, c1, r1), (w2, c2, r2) = runs[v0], runs[v1]
     d = final_error(r1.L[-1], r1.q[-1], r2.L[-1], r2.q[-1])
     dL = final_error(r1.L[-1], None, r2.L[-1], None)
     target = next((s.rate for s in base.stators if s.current > 0), float("nan"))
@@ -611,9 +649,9 @@ def long_spinup(res: Results) -> None:
                 "spin_rev_s": float(r.spin_rate[-1] / (2 * math.pi)),
                 "spin_fraction": float(r.spin_rate[-1] / target), "theta_deg": float(np.degrees(r.theta[-1]))}
 
-    f = 2.0 ** ORDER[Simulator(base)._method()]
-    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={spt0}", w1, c1, r1, d * f / (f - 1), dL * f / (f - 1)))
-    res.spinup.append(entry(_method_label("full"), f"steps_per_turn={2 * spt0}", w2, c2, r2, d / (f - 1), dL / (f - 1)))
+    f = 2.0 ** ORDER[method]
+    res.spinup.append(entry(_method_label("full"), f"{knob}={v0:g}", w1, c1, r1, d * f / (f - 1), dL * f / (f - 1)))
+    res.spinup.append(entry(_method_label("full"), f"{knob}={v1:g}", w2, c2, r2, d / (f - 1), dL / (f - 1)))
     for level in fidelity_levels():
         if level == "full":
             continue
@@ -648,7 +686,7 @@ def profile_kernels(res: Results) -> None:
     cases = [("spinup_thin_shell", {}), (res.config.mode_scene or "spinup_solid_sphere", {"modes": 1}),
              (res.config.mode_scene or "spinup_solid_sphere", {"modes": 50})]
     for name, extra in cases:
-        sim = Simulator(load_scene(name, overrides=_scene_overrides(None, "full", extra)))
+        sim = Simulator(load_scene(name, overrides=_scene_overrides("full", extra)))
         Bre, Bim, om = sim.phasors()
         y = sim.y.copy()
         F = np.zeros(y.size)
@@ -798,13 +836,14 @@ def headline_lines(res: Results) -> list[str]:
         elif h["method"] != full:
             lines.append(f"{h['scene']} ({h['horizon']:g} s): at error {TARGET_ERROR:.0e}, {h['method']} costs "
                          f"{_fmt(h['speedup'], '.3g')}x the CPU time of {full}")
-    byn = {m["modes"]: m for m in res.modes if m["method"] == full}
-    ns = sorted(byn)
-    if len(ns) >= 2:
-        a, b = byn[ns[0]], byn[ns[-1]]
-        lines.append(f"{res.config.mode_scene}: {ns[-1]} modes cost {b['cpu'] / a['cpu']:.2f}x {ns[0]} mode "
-                     f"with {full} (same {a['steps']} steps over {a['horizon']:g} s: {b['steps'] == a['steps']}; "
-                     f"wall-clock ratio {b['wall'] / a['wall']:.2f}x)")
+    for meth in dict.fromkeys(m["method"] for m in res.modes if m["method"].startswith(OURS)):
+        byn = {m["modes"]: m for m in res.modes if m["method"] == meth}
+        ns = sorted(byn)
+        if len(ns) >= 2:
+            a, b = byn[ns[0]], byn[ns[-1]]
+            lines.append(f"{res.config.mode_scene}: {ns[-1]} modes cost {b['cpu'] / a['cpu']:.2f}x {ns[0]} mode "
+                         f"with {meth} (same {a['steps']} steps over {a['horizon']:g} s: {b['steps'] == a['steps']}; "
+                         f"wall-clock ratio {b['wall'] / a['wall']:.2f}x)")
     for m in res.config.baselines:
         bb = {x["modes"]: x for x in res.modes if x["method"] == f"solve_ivp {m}"}
         if len(bb) >= 2:

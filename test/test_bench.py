@@ -80,11 +80,17 @@ def test_cost_at_error_interpolates_log_log():
 
 def test_baseline_and_ours_agree_on_a_short_horizon():
     """The two integrate the same model: tight settings agree far below the benchmark's errors."""
-    ours = run_ours("spinup_thin_shell", 0.02, 768)
+    ours = run_ours("spinup_thin_shell", 0.02, 768, "full/lawson8")
     L_scale = float(np.linalg.norm(ours.L))
     base = run_baseline("spinup_thin_shell", 0.02, "DOP853", 1e-11, L_scale)
     assert final_error(base.L, base.q, ours.L, ours.q) < 1e-9
     assert base.rhs > 0 and base.steps > 0 and ours.steps == 768 * 10
+    # the scene's own stepper (frozen_flow) and its knob
+    ff = run_ours("spinup_thin_shell", 0.02, 1e-6)
+    err = final_error(base.L, base.q, ff.L, ff.q)
+    print(f"\n  frozen_flow rate_change=1e-6 against DOP853 rtol=1e-11 over 0.02 s: {err:.1e} (tolerance 1e-8), "
+          f"{ff.steps} steps")
+    assert ff.knob == "rate_change" and ff.value == 1e-6 and err < 1e-8
 
 
 def _check_outputs(out, scenes):
