@@ -258,9 +258,12 @@ class Simulator:
             else:
                 m, h = "etdrk4", self._max_step(False, "etdrk4")
             if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0:
-                h_ff = self._frozen_flow_step()
-                if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h:
-                    return "frozen_flow", h_ff
+                # decided at both steppers' default settings (the choice follows the physics; the
+                # scene's knobs then set the chosen stepper's accuracy)
+                h_ff = self._frozen_flow_step(DEFAULT_RATE_CHANGE)
+                h_def = self._max_step(False, m, DEFAULT_STEPS_PER_TURN[m])
+                if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h_def:
+                    return "frozen_flow", self._frozen_flow_step()
             return m, h
         return m, self._max_step(False, m)
 
@@ -268,10 +271,10 @@ class Simulator:
         """The stepper a field step would take now (see :meth:`_step_plan`)."""
         return self._step_plan(False)[0]
 
-    def _max_step(self, free: bool, method: str) -> float:
-        spt = self.scene.integrator.steps_per_turn
-        if spt is None:
-            spt = DEFAULT_STEPS_PER_TURN[method]
+    def _max_step(self, free: bool, method: str, spt: Optional[int] = None) -> float:
+        """Largest lawson8/etdrk4/free step (s) at ``spt`` steps per turn (default: the scene's, else the
+        stepper's default) of the fastest rotation, bounded by ``integrator.max_step``."""
+        spt = spt or self.scene.integrator.steps_per_turn or DEFAULT_STEPS_PER_TURN[method]
         L = np.linalg.norm(self.y[0:3])
         if free:
             if self._free_axis != -1:
@@ -287,11 +290,12 @@ class Simulator:
             h = min(h, self.scene.integrator.max_step)
         return h
 
-    def _frozen_flow_step(self) -> float:
+    def _frozen_flow_step(self, eps: Optional[float] = None) -> float:
         """Largest frozen-flow step (s): the body rate may change by ``rate_change`` of the fastest rate Ω
         (spin or field) per step at the torque's scale N = c|B|²(½Σ|w_n| + T_tail(Ω + ν_max)), the largest
-        |m||B| the conductor gives at a slip up to Ω + ν_max (J_min Ω ε / N)."""
-        eps = self.scene.integrator.rate_change or DEFAULT_RATE_CHANGE
+        |m||B| the conductor gives at a slip up to Ω + ν_max (J_min Ω ε / N); ε = ``eps``, else the scene's
+        ``integrator.rate_change``, else :data:`DEFAULT_RATE_CHANGE`."""
+        eps = eps or self.scene.integrator.rate_change or DEFAULT_RATE_CHANGE
         Bre, Bim, _ = self.phasors()
         B = float(np.sum(np.sqrt(np.sum(Bre ** 2, axis=1) + np.sum(Bim ** 2, axis=1))))
         om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
