@@ -15,15 +15,16 @@ from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 
 from ..messages import QOS, TOPICS
-from .common import message_class, qos_profile, stop_on_signals
+from .common import flush_publishers, message_class, qos_profile, stop_on_signals
 
 
 def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0) -> None:
     """Wait until discovery has settled: every subscriber in the graph matched to our publishers and the
-    graph unchanged for ``settle`` s (≤ ``timeout``).
+    graph unchanged for ``settle`` s (2 × ``settle`` while no subscriber is seen; ≤ ``timeout``).
 
     Messages published before a reliable subscriber is matched are lost, so without this the first
-    samples of a replay would be dropped for subscribers that are already running.
+    samples of a replay would be dropped for subscribers that are already running (the samples at the
+    end are kept by :func:`flush_publishers`).
     """
     pubs = list(pubs)
     start = time.perf_counter()
@@ -34,7 +35,9 @@ def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 
         now = time.perf_counter()
         if seen != last:
             last, since = seen, now
-        elif matched and now - since >= settle:
+        elif matched and now - since >= (settle if any(seen) else 2 * settle):
+            # (no subscriber seen yet: give discovery longer, a busy machine can be slow to announce the
+            # participants that are already running)
             break
         time.sleep(0.05)
     # our writers may know a reader before that reader knows them (its first samples would be dropped):
@@ -66,6 +69,9 @@ def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None) -> 
                     stop.wait(ahead)
                 pubs[conn.id].publish(bytes(raw))
                 n += 1
+            # reliable writers still hold the last samples until the readers acknowledge them: a node
+            # destroyed now would drop them (as `ros2 bag play --wait-for-all-acked` does, wait, bounded)
+            flush_publishers(node, 5.0)
             return n
     finally:
         node.destroy_node()
