@@ -35,9 +35,10 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import _equal_steps, _rotl, nonlinear_part_at, phasor_trig
+from .frames import quat_to_matrix
+from .kernels import _equal_steps, _rotl, record_sample
 
-__all__ = ["integrate_frozen", "frozen_flow_step", "supported"]
+__all__ = ["integrate_frozen", "frozen_flow_step", "steady_modes", "supported"]
 
 
 def supported(J: np.ndarray) -> int:
@@ -65,23 +66,41 @@ def _proj(m, n0, n1, n2, v0, v1, v2):
 
 
 @njit(cache=True, inline="always")
-def _integrals(z, h):
-    """I1 = ∫_0^h e^{zs} ds and I2 = ∫_0^h (h − s) e^{zs} ds (complex z)."""
+def _integrals(z, ez, h):
+    """I1 = ∫_0^h e^{zs} ds and I2 = ∫_0^h (h − s) e^{zs} ds (complex z; ez = e^{zh})."""
     zh = z * h
-    if abs(zh) < 1e-2:
+    if zh.real * zh.real + zh.imag * zh.imag < 1e-4:  # |zh| < 1e-2
         # Σ_k (zh)^k/(k+1)!, Σ_k (zh)^k/(k+2)!: the terms left out are < 1e-14 relative
         return (h * (1.0 + zh * (1.0 / 2 + zh * (1.0 / 6 + zh * (1.0 / 24 + zh / 120)))),
                 h * h * (1.0 / 2 + zh * (1.0 / 6 + zh * (1.0 / 24 + zh * (1.0 / 120 + zh / 720)))))
-    ez = cmath.exp(zh)
-    return (ez - 1.0) / z, (ez - 1.0 - zh) / (z * z)
+    d = z.real * z.real + z.imag * z.imag  # 1/z without complex division (|z| ≥ 1e-2/h: no overflow)
+    r = complex(z.real / d, -z.imag / d)
+    i1 = (ez - 1.0) * r
+    return i1, (i1 - h) * r  # (e^{zh} − 1 − zh)/z²
+
+
+@njit(cache=True, inline="always")
+def _epow(E, k):
+    """E^k for |E| = 1 and k in −2 … 2."""
+    if k == 0:
+        return 1.0 + 0j
+    if k == 1:
+        return E
+    if k == -1:
+        return E.conjugate()
+    if k == 2:
+        return E * E
+    return (E * E).conjugate()
 
 
 @njit(cache=True)
-def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, S, E_end, out,
-               K1):
+def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end,
+               out, K1):
     """One pass of the step with L̄ = (Lx, Ly, Lz) (case): out[0:3] = ∫N ds, out[3:6] = ∫(h − s)N ds,
     out[6:10] = the attitude quaternion at s = h; E_end (nm, 3) complex receives the oscillating part of
-    each mode at s = h. ``R`` is R0 (body → case), ``A`` (P, 3) the case phasors a_p = (Bre − iBim)e^{iν s}."""
+    each mode at s = h. ``R`` is R0 (body → case), ``A`` (P, 3) the case phasors a_p = (Bre − iBim)e^{iν s},
+    EO (P,) = e^{iν_p h}. Every exponential of the step is a product of e^{iν_p h}, e^{iΩ_p h}, e^{iΩ_r h}
+    and e^{−h/τ_n} (EZ[k] = e^{Z[k] h}): a few exp calls a pass, not three per term."""
     P = om.shape[0]
     Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
     xa0, xa1, xa2 = R[0, ax], R[1, ax], R[2, ax]  # symmetry axis in the case frame
@@ -93,6 +112,8 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     if math.isnan(La):
         La = Lx * xa0 + Ly * xa1 + Lz * xa2
     Or = (1.0 / Ja - 1.0 / Jt) * La
+    Ep = complex(math.cos(Op * h), math.sin(Op * h))
+    Er = complex(math.cos(Or * h), math.sin(Or * h))
     for n in range(nm):
         for j in range(3):
             S[n, j] = 0.0
@@ -113,7 +134,7 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 c0, c1, c2 = _proj(m2, e0, e1, e2, b0, b1, b2)
                 f = om[p] - m1 * Op - m2 * Or
                 chi = -tail * 1j * f
-                ef = cmath.exp(1j * f * h)
+                ef = EO[p] * _epow(Ep, -m1) * _epow(Er, -m2)  # e^{ifh}
                 for n in range(nm):
                     g = -1j * f / (lam[n] + 1j * f)  # mode n's particular solution is Re(g b e^{ifs})
                     chi += w[n] * g
@@ -134,6 +155,7 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
             for m3 in range(-1, 2):
                 X[k, 0], X[k, 1], X[k, 2] = _proj(m3, l0, l1, l2, U0, U1, U2)
                 Z[k] = 1j * (om[p] + (m3 - m1) * Op)
+                EZ[k] = EO[p] * _epow(Ep, m3 - m1)
                 k += 1
     # free decay of each mode's mismatch with its particular solution: D_n e^{−s/τ_n} (body, real)
     for n in range(nm):
@@ -141,6 +163,7 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
         d0 = c_m * w[n] * (y[i0] - S[n, 0].real)
         d1 = c_m * w[n] * (y[i0 + 1] - S[n, 1].real)
         d2 = c_m * w[n] * (y[i0 + 2] - S[n, 2].real)
+        dec = math.exp(-lam[n] * h)
         for m2 in range(-1, 2):
             e0 = 1.0 if ax == 0 else 0.0
             e1 = 1.0 if ax == 1 else 0.0
@@ -152,6 +175,7 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
             for m3 in range(-1, 2):
                 X[k, 0], X[k, 1], X[k, 2] = _proj(m3, l0, l1, l2, U0, U1, U2)
                 Z[k] = -lam[n] + 1j * (m3 * Op + m2 * Or)
+                EZ[k] = dec * _epow(Ep, m3) * _epow(Er, m2)
                 k += 1
     # N = m_c × B_c with B_c = ½ Σ_q (a_q e^{iν_q s} + conj): ∫ and ∫(h − s) of each product, and with
     # K1[0] = ∫ N e^{−iΩ_p s} ds and K1[1] = ∫ (h − s) N e^{−iΩ_p s} ds (the torque seen from the precession)
@@ -167,9 +191,12 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
             for sg in range(2):
                 if sg == 1:
                     a0, a1, a2 = a0.conjugate(), a1.conjugate(), a2.conjugate()
-                    i1, i2 = _integrals(Z[j] - 1j * om[q], h)
+                    zq = Z[j] - 1j * om[q]
+                    ezq = EZ[j] * EO[q].conjugate()
                 else:
-                    i1, i2 = _integrals(Z[j] + 1j * om[q], h)
+                    zq = Z[j] + 1j * om[q]
+                    ezq = EZ[j] * EO[q]
+                i1, i2 = _integrals(zq, ezq, h)
                 n0 = 0.5 * (x1 * a2 - x2 * a1)
                 n1 = 0.5 * (x2 * a0 - x0 * a2)
                 n2 = 0.5 * (x0 * a1 - x1 * a0)
@@ -180,9 +207,8 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 out[4] += (n1 * i2).real
                 out[5] += (n2 * i2).real
                 # N = ½ Σ (n e^{zs} + conj): each half times e^{−iΩ_p s}
-                zq = Z[j] + (1j * om[q] if sg == 0 else -1j * om[q])
-                k1, m1 = _integrals(zq - 1j * Op, h)
-                k2, m2 = _integrals(zq.conjugate() - 1j * Op, h)
+                k1, m1 = _integrals(zq - 1j * Op, ezq * Ep.conjugate(), h)
+                k2, m2 = _integrals(zq.conjugate() - 1j * Op, (ezq * Ep).conjugate(), h)
                 K1[0, 0] += 0.5 * (n0 * k1 + n0.conjugate() * k2)
                 K1[0, 1] += 0.5 * (n1 * k1 + n1.conjugate() * k2)
                 K1[0, 2] += 0.5 * (n2 * k1 + n2.conjugate() * k2)
@@ -217,10 +243,12 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
 
 
 @njit(cache=True)
-def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, S, E_end, out, R, K1):
+def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, R,
+                     K1):
     """One frozen-flow step of length h (s) from phase time s (in place on y; see the module docstring)."""
     P = om.shape[0]
     for p in range(P):
+        EO[p] = complex(math.cos(om[p] * h), math.sin(om[p] * h))
         e = cmath.exp(1j * om[p] * s)
         for j in range(3):
             A[p, j] = (Bre[p, j] - 1j * Bim[p, j]) * e
@@ -235,32 +263,35 @@ def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A
     R[2, 1] = 2 * (q2 * q3 + q0 * q1)
     R[2, 2] = 1 - 2 * (q1 * q1 + q2 * q2)
     Lx, Ly, Lz = y[0], y[1], y[2]
-    _flow_pass(Lx, Ly, Lz, math.nan, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, S, E_end,
-               out, K1)
+    _flow_pass(Lx, Ly, Lz, math.nan, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S,
+               E_end, out, K1)
     _flow_pass(Lx + out[3] / h, Ly + out[4] / h, Lz + out[5] / h, out[15], y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam,
-               w, c_m, tail, nm, A, X, Z, S, E_end, out, K1)
+               w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1)
     y[0] = Lx + out[0]
     y[1] = Ly + out[1]
     y[2] = Lz + out[2]
     # L in the body frame by variation of constants of L̇_b = −Ω_r e_a × L_b + N_b along the flow:
     # L_b(h) = Rot(e_a, −Ω_r h) (L_b0 + R0ᵀ ∫ Rot(l̂, −Ω_p s) N ds), Rot(l̂, −Ω_p s) = Σ_m P_m(l̂) e^{−imΩ_p s}
-    l0, l1, l2, Op, Or = out[10], out[11], out[12], out[13], out[14]
+    l0, l1, l2, Or = out[10], out[11], out[12], out[14]
     g0, g1, g2 = _proj(0, l0, l1, l2, out[0] + 0j, out[1] + 0j, out[2] + 0j)
     k0, k1, k2 = _proj(1, l0, l1, l2, K1[0, 0], K1[0, 1], K1[0, 2])
     G0 = Lx + g0.real + 2.0 * k0.real
     G1 = Ly + g1.real + 2.0 * k1.real
     G2 = Lz + g2.real + 2.0 * k2.real
-    v = np.empty(3)
-    for j in range(3):
-        v[j] = R[0, j] * G0 + R[1, j] * G1 + R[2, j] * G2
+    u0 = R[0, 0] * G0 + R[1, 0] * G1 + R[2, 0] * G2
+    u1 = R[0, 1] * G0 + R[1, 1] * G1 + R[2, 1] * G2
+    u2 = R[0, 2] * G0 + R[1, 2] * G1 + R[2, 2] * G2
+    # Rot(e_a, −Ω_r h) about the symmetry axis: (u_{a+1}, u_{a+2}) turned by −Ω_r h
     ca, sa = math.cos(Or * h), math.sin(-Or * h)
-    i1, i2 = (ax + 1) % 3, (ax + 2) % 3
-    v1 = ca * v[i1] - sa * v[i2]
-    v2 = sa * v[i1] + ca * v[i2]
-    v[i1], v[i2] = v1, v2
+    if ax == 0:
+        u1, u2 = ca * u1 - sa * u2, sa * u1 + ca * u2
+    elif ax == 1:
+        u2, u0 = ca * u2 - sa * u0, sa * u2 + ca * u0
+    else:
+        u0, u1 = ca * u0 - sa * u1, sa * u0 + ca * u1
     # the attitude: the flow's, turned by the least rotation that takes its R(h) L_b(h) onto L(h)
     f0, f1, f2, f3 = out[6], out[7], out[8], out[9]
-    c0, c1, c2 = _rotl(f0, f1, f2, f3, v[0], v[1], v[2])
+    c0, c1, c2 = _rotl(f0, f1, f2, f3, u0, u1, u2)
     nc = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
     nl = math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2])
     if nc > 0.0 and nl > 0.0:
@@ -282,6 +313,22 @@ def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A
             y[i0 + j] = dec * (y[i0 + j] - S[n, j].real) + E_end[n, j].real
 
 
+def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
+    """(N, 3) eddy-mode states (body frame, T) in their steady response to the field (phasors referred to
+    s = 0) along the free motion of the state ``y``: the particular solution of a frozen-flow pass, with
+    no switch-on transient. ``lam`` (N,) = 1/τ_n."""
+    nm, P = lam.shape[0], om.shape[0]
+    h = 1e-3  # any step: the particular solution at s = 0 does not depend on it
+    R = quat_to_matrix(y[3:7])
+    S = np.zeros((nm, 3), np.complex128)
+    k = 9 * (P + nm)
+    _flow_pass(y[0], y[1], y[2], math.nan, y, R, 0.0, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm,
+               (Bre - 1j * Bim).astype(np.complex128), np.empty((k, 3), np.complex128), np.empty(k, np.complex128),
+               np.empty(k, np.complex128), np.exp(1j * om * h).astype(np.complex128), S,
+               np.empty((nm, 3), np.complex128), np.empty(16), np.empty((2, 3), np.complex128))
+    return S.real
+
+
 @njit(cache=True)
 def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes,
                      out_y, out_N, k_out, eff):
@@ -293,6 +340,8 @@ def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, J
     A = np.empty((P, 3), np.complex128)
     X = np.empty((9 * (P + nm), 3), np.complex128)
     Z = np.empty(9 * (P + nm), np.complex128)
+    EZ = np.empty(9 * (P + nm), np.complex128)
+    EO = np.empty(P, np.complex128)
     S = np.empty((max(nm, 1), 3), np.complex128)
     E_end = np.empty((max(nm, 1), 3), np.complex128)
     out = np.empty(16)
@@ -310,15 +359,11 @@ def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, J
             k, h = _equal_steps(span, h_max)
             for j in range(k):
                 frozen_flow_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, Ja, ax, lam_modes, w, c_m, tail, nm,
-                                 A, X, Z, S, E_end, out, R, K1)
+                                 A, X, Z, EZ, EO, S, E_end, out, R, K1)
             steps += k
             t = t_stops[i]
         if record[i]:
-            out_y[k_out, :] = y
-            phasor_trig(t - t_seg, om, cs, sn)
-            nonlinear_part_at(cs, sn, t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
-            out_N[k_out, 0] = F[0]
-            out_N[k_out, 1] = F[1]
-            out_N[k_out, 2] = F[2]
+            record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N,
+                          k_out)
             k_out += 1
     return k_out, steps

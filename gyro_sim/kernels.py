@@ -694,11 +694,19 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
             steps += k
             t = t_stops[i]
         if record[i]:
-            out_y[k_out, :] = y
-            phasor_trig(t - t_seg, om, tw[0], tw[1])
-            nonlinear_part_at(tw[0], tw[1], t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[0], work, eff)
-            out_N[k_out, 0] = Fs[0, 0]
-            out_N[k_out, 1] = Fs[0, 1]
-            out_N[k_out, 2] = Fs[0, 2]
+            record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, tw[0], tw[1], Fs[0], work, out_y,
+                          out_N, k_out)
             k_out += 1
     return k_out, steps
+
+
+@njit(cache=True)
+def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k):
+    """Output sample k: the state y and the torque (case, N·m) at phase time s (scratch: cs, sn (P,), F (n,),
+    work (25,))."""
+    out_y[k, :] = y
+    phasor_trig(s, om, cs, sn)
+    nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
+    out_N[k, 0] = F[0]
+    out_N[k, 1] = F[1]
+    out_N[k, 2] = F[2]

@@ -38,9 +38,10 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     duration: 60.0                   # s
     output: {rate: 100.0}            # samples per second of simulated time
     integrator:
-      method: auto                   # lawson8 | etdrk4 | frozen_flow | auto: lawson8 unless an eddy mode is
-                                     # stiff (h > 2τ_n); frozen_flow: steps longer than a field turn
-                                     # (axisymmetric rotor, no effects; gyro_sim/frozen_flow.py)
+      method: auto                   # lawson8 | etdrk4 | frozen_flow | auto: frozen_flow where it applies
+                                     # and pays, else lawson8 unless an eddy mode is stiff (h > 2τ_n), then
+                                     # etdrk4; frozen_flow: steps longer than a field turn (axisymmetric
+                                     # rotor, no effects; gyro_sim/frozen_flow.py, docs/numerics.md)
       steps_per_turn: null           # lawson8/etdrk4: steps per period of the fastest rotation (spin or
                                      # field); default 12 for lawson8, 48 for etdrk4
       rate_change: null              # frozen_flow: largest change of the body rate per step as a fraction

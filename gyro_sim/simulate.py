@@ -74,9 +74,15 @@ class RunResult:
     @property
     def euler(self) -> np.ndarray:
         """(n,3) ψ, θ, φ rad (body in the L-frame): computed from L and q when first read (a run whose
-        Euler angles no one reads does no Euler-angle work)."""
+        Euler angles no one reads does no Euler-angle work). Inside averaged stretches ψ and φ are NaN:
+        the averaged model has averaged those fast phases out."""
         if self._euler is None:
-            self._euler = euler_angles(quat_to_matrix(self.q), self.L)
+            eul = euler_angles(quat_to_matrix(self.q), self.L)
+            for t0, t1 in self.averaged_segments:  # the rows an averaged stretch wrote: t0 < t ≤ t1
+                inside = (self.t > t0 + 1e-12) & (self.t <= t1 + 1e-12)
+                eul[inside, 0] = np.nan
+                eul[inside, 2] = np.nan
+            self._euler = eul
         return self._euler
 
     @property
@@ -152,6 +158,7 @@ class Simulator:
         triads = [stator_triad(s.axis) for s in st]
         self.e1 = np.array([t[0] for t in triads]).reshape(-1, 3)
         self.e2 = np.array([t[1] for t in triads]).reshape(-1, 3)
+        self.axes = np.array([t[2] for t in triads]).reshape(-1, 3)  # unit stator axes u = e1 × e2
         self.b = np.array([s.coil_constant for s in st], dtype=float)
         self.current = np.array([s.current for s in st], dtype=float)
         self.rate = np.array([s.rate for s in st], dtype=float)
@@ -172,6 +179,7 @@ class Simulator:
             self.y[k0:k0 + 3] = scene.effects.damper.offset
             self.y[k0 + 3:k0 + 6] = scene.effects.damper.velocity
         self.t = 0.0
+        self._seg, self._seg_t_end = None, math.nan  # see _segment
         # the fields are switched on at t = 0 on a rotor free of eddy currents
         self._field_step(np.zeros(3), self.field_now())
         self.steps = 0
@@ -341,16 +349,13 @@ class Simulator:
             if stops[-1] < t_end:
                 stops = np.append(stops, t_end)
                 record = np.append(record, False)
-        Bre, Bim, om = self.phasors()
-        # no field (or no torque model) and no effect: the geometric free stepper
-        free = (om.size == 0 or (self.c_m == 0.0 and self.eff[effects.MAG] == 0.0)) and self.eff[effects.ON] == 0.0
-        method, h_max = self._step_plan(free)
+        t_seg, Bre, Bim, om, free, method, h_max = self._segment()
         if not math.isfinite(h_max):
             h_max = max(t_end - self.t, 1e-300)
         if method == "frozen_flow":
             ax = frozen_flow.supported(self.J)
             k_out, steps = frozen_flow.integrate_frozen(
-                self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
+                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
                 self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff)
         elif free:
             k_out, steps = kernels.integrate_free(
@@ -358,12 +363,35 @@ class Simulator:
                 out_y, out_N, k_out)
         else:
             k_out, steps = kernels.integrate(
-                self.y, self.t, self.t, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
+                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
                 self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method])
         self.steps += steps
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
+        self._seg_t_end = t_end
         return k_out
+
+    def _segment(self) -> tuple:
+        """(t_seg, Bre, Bim, ω, free, stepper, h_max) for the next advance: the phasors referred to t_seg and
+        the step plan, kept from the previous advance while the commands are the same and the time goes on
+        from where it ended, so a run gives the same bits whether its output samples are breaks or not;
+        computed afresh otherwise, and at every advance when an effect is on (its rates change in time).
+        The plan is made for the rates at the start of a command segment: ``steps_per_turn`` and
+        ``rate_change`` hold there. Within a segment a spin-up below the field's rates keeps it (the
+        fastest rate is the field's), but a rotor braking from above them keeps the step of its start:
+        frozen_flow's step, which grows with the rate, is then up to (start rate / present rate) times
+        longer than ``rate_change`` asks (a braking run forced to frozen_flow measured 5x the error of a
+        re-planned one); give such scenes a ``max_step`` or commands that re-plan."""
+        key = (self.current.tobytes(), self.rate.tobytes())
+        seg = self._seg
+        if seg is not None and seg[0] == key and self.t == self._seg_t_end and self.eff[effects.ON] == 0.0:
+            return seg[1]
+        Bre, Bim, om = self.phasors()
+        # no field (or no torque model) and no effect: the geometric free stepper
+        free = (om.size == 0 or (self.c_m == 0.0 and self.eff[effects.MAG] == 0.0)) and self.eff[effects.ON] == 0.0
+        method, h_max = self._step_plan(free)
+        self._seg = (key, (self.t, Bre, Bim, om, free, method, h_max))
+        return self._seg[1]
 
     def torque(self) -> np.ndarray:
         """Electrodynamic torque now (case frame, N·m)."""
@@ -425,14 +453,15 @@ def kinetic_energy(J: np.ndarray, omega_b: np.ndarray) -> np.ndarray:
 class Runner:
     """Advances a :class:`Simulator` break by break over a scene's duration, collecting the outputs.
 
-    Breaks are the output instants, the scene's command instants and the controller ticks. At each
+    Breaks are the output instants (unless ``sample_breaks`` is False), the scene's command instants and
+    the controller ticks. At each
     break the scene's due commands are applied; at a controller tick the caller supplies the
     commands (in-process: the law; ROS node: the command message). The sample recorded at time t
     shows the state at t and the field that acted up to t. Used by :func:`run` and by the
     simulator node, so both produce the same numbers.
     """
 
-    def __init__(self, scene: Scene, duration: Optional[float] = None):
+    def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
@@ -451,7 +480,13 @@ class Runner:
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
         fly = scene.effects.flywheel  # the kinks of its speed profile are breaks: steps never straddle one
         knots = {t for t in fly.profile.time if 0 < t < T} if fly is not None else set()
-        self.breaks = sorted(set(t_out.tolist()) | {c.time for c in self._cmds} | self._ticks | {T} | knots)
+        # output samples are breaks where a caller acts on each (the ROS node publishes and paces); in-process
+        # they are recorded inside one advance (the same bits: Simulator._segment)
+        # (with an effect on the step plan is made afresh at every advance: the samples stay breaks)
+        if self.sim.eff[effects.ON] != 0.0:
+            sample_breaks = True
+        samples = set(t_out.tolist()) if sample_breaks else set()
+        self.breaks = sorted(samples | {c.time for c in self._cmds} | self._ticks | {T} | knots)
         n = t_out.size
         k = len(self.sim.stator_names)
         self.out_y = np.empty((n, self.sim.y.size))
@@ -632,10 +667,12 @@ def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunR
         from .fidelity import run_hybrid
 
         return run_hybrid(scene, duration)
-    r = Runner(scene, duration)
     ctl = scene.controller
     law = make_law(ctl) if ctl is not None else None
     switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    # samples are breaks where a caller acts on them, and where switching events are looked for between
+    # breaks (the node does the same: the same events, the same bits)
+    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching is not None)
     w0 = time.perf_counter()
     while not r.done:
         if r.row > 0 and law is not None and r.is_control_tick:
