@@ -363,6 +363,24 @@ class AveragedM:
             return False, f"eddy transient too slow: μ l τ1 = {tr:.3g} > {mu_max:g} (τ1 = {self.tau1:.3g} s)"
         return True, f"μ = {mu:.3g}, μ_eff = {mue:.3g}, μ l τ1 = {tr:.3g} (≤ {mu_max:g})"
 
+    def exit_events(self, mu_max: float = MU_MAX) -> list:
+        """solve_ivp events (terminal, falling) at which a solution leaves :meth:`region`: its two tests in
+        continuous form, mu_max f_min − μ l (small, non-resonant torque) and mu_max − μ l τ1 (short eddy
+        transient), each ≥ 0 inside."""
+        def torque(t, y):
+            L = y[0]
+            if L <= 0:
+                return -1.0
+            return mu_max * float(np.min(self.torque_frequencies(L))) - self.mu(L, y[3]) * L / self.J1
+
+        def transient(t, y):
+            L = y[0]
+            return mu_max - self.mu(L, y[3]) * L / self.J1 * self.tau1 if L > 0 else -1.0
+
+        for e in (torque, transient):
+            e.terminal, e.direction = True, -1
+        return [torque, transient]
+
     def first_exit(self, res: "AveragedMResult", mu_max: float = MU_MAX) -> tuple[Optional[float], str]:
         """(first sample time at which :meth:`region` fails along an averaged solution, reason), or (None, '')."""
         for t, L, rho, th in zip(res.t, res.L, res.rho, res.theta):

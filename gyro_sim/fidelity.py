@@ -20,6 +20,15 @@ number of revolutions. It holds where (checked by :func:`averaged_region`):
 the averaged model to the next scheduled command or the end; at a command it hands back to the
 full model (attitude rebuilt from θ with ψ = φ = 0, eddy modes from their quasi-steady response)
 and so on. ``averaged`` refuses a scene that starts outside the region.
+
+The second averaged model is [M]'s (:mod:`gyro_sim.averaged_m`: (3.6), (3.14), (3.17)) for the three
+uniform fields of [M] §3 (constant along z3, pulsating along z3, rotating about z3; no command, no
+controller, no effect). Its slow state is (|L|, ρ, σ, θ) and it holds where
+:meth:`AveragedM.region` says so with μ_eff ≤ ``MU_MAX`` (small torque against the precession,
+non-resonant torque harmonics, short eddy transient; any θ). ``auto`` hands over to it where the
+[K] spin-up model does not apply and runs it to the end, or back to the full model at the instant
+its solution leaves the region (:meth:`AveragedM.exit_events`) (L from (|L|, ρ, σ), attitude at ψ = φ = 0, eddy modes at
+their steady response along the free motion: :func:`gyro_sim.frozen_flow.steady_modes`).
 """
 from __future__ import annotations
 
@@ -31,7 +40,8 @@ from typing import Optional
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .frames import attitude_from_euler
+from .averaged_m import AveragedM, averaged_m_model
+from .frames import attitude_from_euler, quat_to_matrix
 from .scene import Scene, SceneError
 from .simulate import RunResult, Runner
 
@@ -53,16 +63,16 @@ class SpinupModel:
     B0: float  # T
     nu: float  # rad/s, signed along u
 
-    def g_imag(self, w: float) -> float:
-        """Im ĝ(ω) of the modal model (plain floats: this is the model's whole cost)."""
+    def g_imag(self, w):
+        """Im ĝ(ω) of the modal model (plain floats: this is the model's whole cost; arrays elementwise)."""
         acc = w * self.tail
         for wn, tn in zip(self.weight, self.tau):
             x = w * tn
             acc += wn * x / (1.0 + x * x)
         return acc
 
-    def torque(self, L: float) -> float:
-        """Axial torque (N·m) at |L| (N·m·s): torque-slip curve."""
+    def torque(self, L):
+        """Axial torque (N·m) at |L| (N·m·s; a float or an array): torque-slip curve."""
         return self.scale * self.B0**2 * self.g_imag(self.nu - L / self.J3)
 
     def nutation_rate(self, L: float) -> float:
@@ -138,32 +148,52 @@ def averaged_region(runner: Runner) -> tuple[Optional[int], str]:
     if ctl is not None and not (ctl.law == "spinup" and ctl.params.ramp is None):
         return None, f"controller law {ctl.law!r} is not a constant command"
     k = on[0]
-    u = np.cross(sim.e1[k], sim.e2[k])
+    u = sim.axes[k]
     L = sim.y[0:3]
-    Ln = float(np.linalg.norm(L))
+    Ln = math.sqrt(float(L @ L))
     if Ln == 0.0:
         return None, "|L| = 0"
     rho = math.acos(min(1.0, abs(float(L @ u)) / Ln))
     if rho > RHO_MAX:
         return None, f"L is {rho:.2e} rad off the stator axis (limit {RHO_MAX:g})"
+    # μ before θ: a scalar formula, and the test that fails through a spin-up from rest
+    mu = _model(runner, k).mu(Ln)
+    if mu > MU_MAX:
+        return None, f"μ = {mu:.2e} > {MU_MAX:g} (spin too low for the averaging)"
     x = runner.control_input()
     if x.theta > THETA_MAX:
         return None, f"θ = {x.theta:.3g} rad > {THETA_MAX:g}"
-    m = _model(runner, k)
-    mu = m.mu(Ln)
-    if mu > MU_MAX:
-        return None, f"μ = {mu:.2e} > {MU_MAX:g} (spin too low for the averaging)"
     return k, ""
+
+
+def _write_averaged_rows(r: Runner, rows: np.ndarray, L: np.ndarray, q: np.ndarray, N: np.ndarray) -> None:
+    """Output rows of an averaged stretch: case-frame L (n, 3), attitude (n, 4), torque (n, 3); the eddy modes
+    (averaged out) 0; the commands and field phases of the present, constant command."""
+    sim = r.sim
+    r.out_y[rows] = 0.0
+    r.out_y[rows, 0:3] = L
+    r.out_y[rows, 3:7] = q
+    r.out_N[rows] = N
+    r.cur[rows], r.rate[rows] = sim.current, sim.rate
+    r.phase[rows] = np.mod(sim.phase + sim.rate * (r.t_out[rows, None] - sim.t), 2 * math.pi)
+
+
+def _jump(r: Runner, n: int, t0: float, t1: float) -> None:
+    """Move the runner past an averaged stretch [t0, t1] whose n output rows are written: the next break
+    after t1, the field phases and the time at t1 (the state is the caller's to set)."""
+    sim = r.sim
+    r.row += n
+    r._bi = int(np.searchsorted(r.breaks, t1 + 1e-12 * max(1.0, t1)))
+    sim.phase = np.mod(sim.phase + sim.rate * (t1 - t0), 2 * math.pi)
+    sim.t = t1
 
 
 def _handover_to_full(runner: Runner, k: int, L: float, theta: float) -> None:
     """Rebuild the full state from (|L|, θ): L along u, attitude at ψ = φ = 0, eddy modes in their
     steady response to the present field (no switch-on transient): for a body-frame field
     B_b(t) = Re[(b_re + i b_im) e^{−i s t}], e_n = Re[ĝ_n(s)(b_re + i b_im)], b_im = (dB_b/dt)/s."""
-    from .frames import quat_to_matrix
-
     sim = runner.sim
-    u = np.cross(sim.e1[k], sim.e2[k])
+    u = sim.axes[k]
     d = (1.0 if sim.rate[k] >= 0 else -1.0) * u
     sim.y[0:3] = L * d
     sim.y[3:7] = attitude_from_euler(d, 0.0, theta, 0.0)
@@ -193,25 +223,28 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     cmd_times = sorted({c.time for c in scene.commands if c.time < r.T})
     segments = []  # (t0, t1) of averaged stretches
     nfev = 0
+    at_edge = False  # an [M] stretch just ended at its region's edge: the full model takes a break first
     while not r.done:
         if r.row > 0 and law is not None and r.is_control_tick:
             r.apply_commands(law(r.control_input()))
-        if r.row > 0:
+        if r.row > 0 and not at_edge:
             k, why = averaged_region(r)
-            if strict and k is None and not segments:
-                raise SceneError(f"fidelity = 'averaged': the averaged model does not hold at t = {r.sim.t:g} s: "
-                                 f"{why}; use fidelity: auto or full")
             if k is not None:
                 nfev += _averaged_stretch(r, k, cmd_times, segments)
                 continue
+            m, why_m = m_region(r)
+            if m is not None:
+                nfev += _m_stretch(r, m, segments)
+                at_edge = True
+                continue
+            if strict and not segments:
+                raise SceneError(f"fidelity = 'averaged': the averaged model does not hold at t = {r.sim.t:g} s: "
+                                 f"{why}; [M]'s averaged model: {why_m}; use fidelity: auto or full")
+        at_edge = False
         r.advance()
     res = r.result()
     res.wall_time = time.perf_counter() - w0
-    for t0, t1 in segments:  # the fast phases ψ, φ are averaged out there
-        inside = (res.t > t0 + 1e-12) & (res.t < t1 - 1e-12)
-        res.euler[inside, 0] = np.nan
-        res.euler[inside, 2] = np.nan
-    res.averaged_segments = segments
+    res.averaged_segments = segments  # RunResult.euler: ψ, φ NaN there (averaged out)
     res.averaged_rhs_evaluations = nfev
     return res
 
@@ -228,25 +261,116 @@ def _averaged_stretch(r: Runner, k: int, cmd_times: list, segments: list) -> int
     t_eval = np.append(r.t_out[rows], t1) if (not rows.size or r.t_out[rows[-1]] < t1) else r.t_out[rows]
     L, th, nfev = model.solve(L0, theta0, t0, t_eval)
     n = rows.size
-    u = np.cross(sim.e1[k], sim.e2[k]) * (1.0 if model.nu >= 0 else -1.0)
+    u = sim.axes[k] * (1.0 if model.nu >= 0 else -1.0)
     if n:
         # attitude Y Rx(θ) (ψ = φ = 0: the fast phases are averaged out) as q_Y ⊗ (cos θ/2, sin θ/2, 0, 0)
         qY = attitude_from_euler(u, 0.0, 0.0, 0.0)
         c, s_ = np.cos(0.5 * th[:n]), np.sin(0.5 * th[:n])
         q = np.stack([qY[0] * c - qY[1] * s_, qY[0] * s_ + qY[1] * c, qY[2] * c + qY[3] * s_,
                       qY[3] * c - qY[2] * s_], axis=1)
-        r.out_y[rows] = 0.0
-        r.out_y[rows, 0:3] = L[:n, None] * u
-        r.out_y[rows, 3:7] = q
-        r.out_N[rows] = np.array([model.torque(x) for x in L[:n]])[:, None] * u
-        r.cur[rows], r.rate[rows] = sim.current, sim.rate
-        r.phase[rows] = np.mod(sim.phase + sim.rate * (r.t_out[rows, None] - t0), 2 * math.pi)
+        # elementwise torque: the model is plain arithmetic
+        _write_averaged_rows(r, rows, L[:n, None] * u, q, model.torque(L[:n])[:, None] * u)
     # hand over: the state at t1, then the runner continues from there
-    r.row += n
-    r._bi = int(np.searchsorted(r.breaks, t1 + 1e-12 * max(1.0, t1)))
-    sim.phase = np.mod(sim.phase + sim.rate * (t1 - t0), 2 * math.pi)
-    sim.t = t1
+    _jump(r, n, t0, t1)
     _handover_to_full(r, k, float(L[-1]), float(th[-1]))
     r.apply_scene_commands()
     segments.append((t0, t1))
     return nfev
+
+
+# ------------------------------------------------------------------------------------------------
+# [M]'s averaged model in the hybrid
+# ------------------------------------------------------------------------------------------------
+def _m_model(runner: Runner) -> tuple[Optional[AveragedM], str]:
+    """[M]'s averaged model of the runner's scene (cached on the runner), or (None, why not)."""
+    cache = runner.__dict__
+    if "_m_model" not in cache:
+        if runner.scene.effects.any:
+            cache["_m_model"] = (None, "effects are on; [M]'s model has none of them")
+        else:
+            try:
+                cache["_m_model"] = (averaged_m_model(runner.scene), "")
+            except SceneError as exc:
+                cache["_m_model"] = (None, str(exc).splitlines()[0])
+    return cache["_m_model"]
+
+
+def slow_state(sim) -> np.ndarray:
+    """[M]'s slow variables (|L| N·m·s, ρ, σ, θ rad) of a simulator's present state (case-frame L; θ the
+    angle between the body's x3 and L)."""
+    L = sim.y[0:3]
+    Ln = math.sqrt(float(L @ L))
+    x3 = quat_to_matrix(sim.y[3:7])[:, 2]
+    cos_th = float(x3 @ L) / Ln if Ln > 0 else 1.0
+    return np.array([Ln, math.atan2(math.hypot(L[0], L[1]), L[2]), math.atan2(L[1], L[0]),
+                     math.acos(max(-1.0, min(1.0, cos_th)))])
+
+
+def m_region(runner: Runner) -> tuple[Optional[AveragedM], str]:
+    """([M]'s model, '') if it holds at the runner's present state (μ_eff ≤ ``MU_MAX``), else (None, why)."""
+    model, why = _m_model(runner)
+    if model is None:
+        return None, why
+    y = slow_state(runner.sim)
+    ok, why = model.region(L=y[0], rho=y[1], theta=y[3], mu_max=MU_MAX)
+    return (model, "") if ok else (None, why)
+
+
+def _m_outputs(L, rho, sigma, theta) -> tuple[np.ndarray, np.ndarray]:
+    """Case-frame L (n, 3) and the attitude (n, 4) at ψ = φ = 0 of [M]'s slow variables: the body is
+    Rz(σ) Ry(ρ) Rx(θ) (the L-frame of l_frame turned by θ about y1), as q_z(σ) ⊗ q_y(ρ) ⊗ q_x(θ)."""
+    sr, cr, ss, cs = np.sin(rho), np.cos(rho), np.sin(sigma), np.cos(sigma)
+    Lc = L[:, None] * np.stack([sr * cs, sr * ss, cr], axis=1)
+    a, b = np.cos(0.5 * sigma), np.sin(0.5 * sigma)  # q_z(σ) ⊗ q_y(ρ) = (a c, −b s, a s, b c)
+    c, d = np.cos(0.5 * rho), np.sin(0.5 * rho)
+    w0, w1, w2, w3 = a * c, -b * d, a * d, b * c
+    e, f = np.cos(0.5 * theta), np.sin(0.5 * theta)  # ⊗ (e, f, 0, 0)
+    q = np.stack([w0 * e - w1 * f, w0 * f + w1 * e, w2 * e + w3 * f, w3 * e - w2 * f], axis=1)
+    return Lc, np.where(q[:, :1] < 0, -q, q)  # w ≥ 0, as frames.matrix_to_quat gives
+
+
+def _m_stretch(r: Runner, model: AveragedM, segments: list) -> int:
+    """Jump the runner over a stretch of [M]'s averaged model: to the end of the run, or to the instant its
+    solution leaves the region (located by events between samples; there back to the full model).
+    Returns RHS evaluations."""
+    sim = r.sim
+    t0 = sim.t
+    rows = np.nonzero(r.t_out > t0 + 1e-12)[0]
+    y0 = slow_state(sim)
+    atol = np.array([1e-12 * max(y0[0], 1e-300), 1e-12, 1e-12, 1e-12])
+    sol = solve_ivp(model.rhs, (t0, r.T), y0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
+                    dense_output=True, events=model.exit_events(MU_MAX))
+    if sol.status < 0:
+        raise RuntimeError(f"[M] averaged model: integration failed: {sol.message}")
+    exits = [(float(te[0]), ye[0]) for te, ye in zip(sol.t_events, sol.y_events) if te.size]
+    t1, y1 = min(exits, key=lambda e: e[0]) if exits else (r.T, sol.y[:, -1])
+    n = int(np.count_nonzero(r.t_out[rows] <= t1 + 1e-12 * max(1.0, t1)))
+    rows = rows[:n]
+    if n:
+        ts = r.t_out[rows]
+        Lc, q = _m_outputs(*sol.sol(ts))
+        # the averaged torque dL/dt (case frame): the dense output's central difference, δ small against
+        # the steps (its truncation ~ δ², round-off ~ 1e-16 |L|/δ)
+        d = 1e-6 * max(t1 - t0, 1e-300)
+        tp, tm = np.minimum(ts + d, t1), np.maximum(ts - d, t0)
+        N = (_m_outputs(*sol.sol(tp))[0] - _m_outputs(*sol.sol(tm))[0]) / (tp - tm)[:, None]
+        _write_averaged_rows(r, rows, Lc, q, N)
+    _jump(r, n, t0, t1)
+    segments.append((t0, t1))
+    _m_handover_to_full(sim, y1)
+    return int(sol.nfev)
+
+
+def _m_handover_to_full(sim, y_slow: np.ndarray) -> None:
+    """The full state from [M]'s slow variables: L, the attitude at ψ = φ = 0, each eddy mode at its steady
+    response to the field along the free motion (:func:`gyro_sim.frozen_flow.steady_modes`)."""
+    from . import frozen_flow
+
+    Lc, q = _m_outputs(*(np.atleast_1d(v) for v in y_slow))
+    sim.y[0:3], sim.y[3:7] = Lc[0], q[0]
+    if sim.tau.size:
+        ax = frozen_flow.supported(sim.J)
+        ax = 2 if ax < 0 else ax  # [M]'s region takes J1 = J2 to 1e-9: the polar axis x3
+        Bre, Bim, om = sim.phasors()
+        sim.y[7:7 + 3 * sim.tau.size] = frozen_flow.steady_modes(
+            sim.y, Bre, Bim, om, sim.J[(ax + 1) % 3], sim.J[ax], ax, 1.0 / sim.tau, sim.w, sim.c_m, sim.tail).ravel()

@@ -80,3 +80,66 @@ def test_averaged_twenty_minute_spinup_costs_milliseconds():
     revs = np.trapezoid(L / m.J3, t) / (2 * math.pi)
     print(f"\naveraged 1190 s, {revs:.2e} revolutions: {w * 1e3:.2f} ms, {nfev} RHS evaluations")
     assert nfev < 2000 and L[-1] / m.J3 > 0.9 * m.nu
+
+
+def _slow_errors(full, hy):
+    from gyro_sim.averaged_m import slow_variables
+
+    sf, sh = slow_variables(full), slow_variables(hy)
+    L0 = max(sf["L"][0], sf["L"][-1])
+    return {"L": float(np.max(np.abs(sf["L"] - sh["L"])) / L0), "rho": float(np.max(np.abs(sf["rho"] - sh["rho"]))),
+            "theta": float(np.max(np.abs(sf["theta"] - sh["theta"]))),
+            "L_end": float(abs(sh["L"][-1] / sf["L"][-1] - 1)), "theta_end": float(abs(sh["theta"][-1] - sf["theta"][-1]))}
+
+
+def test_auto_runs_m_averaged_model_and_hands_back():
+    """[M]'s averaged model inside `auto`: the constant field from the start until the braked spin leaves its
+    region (μ_eff > 1e-3), then the full model; the rotating field once spun up, to the end. Slow variables
+    against the full model over the whole run (the O(μ) ripple of the full model counts as error)."""
+    for name, tol in (("constant_field", {"L": 1e-4, "rho": 1e-4, "theta": 2e-3, "L_end": 1e-8}),
+                      ("rotating_field", {"L": 1e-5, "rho": 1e-6, "theta": 1e-6, "L_end": 1e-5})):
+        full = gyro_sim.run(gyro_sim.load_scene(name))
+        hy = gyro_sim.run(gyro_sim.load_scene(name, overrides={"fidelity": "auto"}))
+        err = _slow_errors(full, hy)
+        segs = hy.averaged_segments
+        print(f"\n  {name}: averaged {[(round(a, 3), round(b, 3)) for a, b in segs]}; max errors "
+              + ", ".join(f"{k} {v:.1e} (tol {tol[k]:.0e})" for k, v in err.items() if k in tol))
+        assert len(segs) == 1 and segs[0][1] - segs[0][0] > 5.0
+        for k, t in tol.items():
+            assert err[k] < t, (name, k, err[k])
+    # the rotating field's stretch runs to the end; the constant field's ends before the run (hand-back)
+    assert segs[0][1] == pytest.approx(30.0)
+    hy = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={"fidelity": "auto"}))
+    assert hy.averaged_segments[0][1] < 60.0 and np.isfinite(hy.euler[-1, 0])
+
+
+def test_averaged_fidelity_takes_m_model_or_names_both_reasons():
+    r = gyro_sim.run(gyro_sim.load_scene("rotating_field", overrides={"fidelity": "averaged", "initial.spin": 3000.0}))
+    assert r.averaged_segments and r.averaged_segments[0][0] <= 0.02
+    with pytest.raises(gyro_sim.SceneError, match=r"fidelity = 'averaged'.*general field.*\[M\]'s averaged model: "
+                                                  r"μ_eff = .* near resonance"):
+        gyro_sim.run(gyro_sim.load_scene("pulsating_field", overrides={"fidelity": "averaged"}))
+
+
+def test_m_stretch_exit_between_samples_and_exact_torque():
+    """The [M] stretch ends where its solution leaves the region, not at the next output sample (the same
+    instant at 20 and at 0.2 samples per second), and its torque output is the averaged model's dL/dt."""
+    from gyro_sim.averaged_m import averaged_m_model
+
+    dense = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={"fidelity": "auto"}))
+    sparse = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={"fidelity": "auto", "output.rate": 0.2}))
+    t_dense, t_sparse = dense.averaged_segments[0][1], sparse.averaged_segments[0][1]
+    model = averaged_m_model(dense.scene)
+    worst = 0.0
+    for i in np.nonzero((dense.t > 0) & (dense.t < t_dense))[0][::10]:
+        L = dense.L[i]
+        Ln, rho, sig = np.linalg.norm(L), math.atan2(math.hypot(L[0], L[1]), L[2]), math.atan2(L[1], L[0])
+        dL, drho, dsig, _ = model.rates(Ln, rho, sig, dense.theta[i])
+        sr, cr, ss, cs = math.sin(rho), math.cos(rho), math.sin(sig), math.cos(sig)
+        N = (dL * np.array([sr * cs, sr * ss, cr]) + Ln * drho * np.array([cr * cs, cr * ss, -sr])
+             + Ln * dsig * np.array([-sr * ss, sr * cs, 0.0]))
+        worst = max(worst, float(np.linalg.norm(dense.torque[i] - N) / np.linalg.norm(N)))
+    print(f"\n  hand-back at {t_dense:.6f} s (20 Hz output) and {t_sparse:.6f} s (0.2 Hz); torque vs the model's "
+          f"rates: {worst:.1e} (tol 1e-6)")
+    assert t_dense < 10.0 and t_sparse == pytest.approx(t_dense, rel=1e-9, abs=1e-9)
+    assert worst < 1e-6
