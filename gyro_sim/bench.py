@@ -471,6 +471,7 @@ class Results:
     rtf: list = field(default_factory=list)  # dicts: scene, duration, wall, steps, rtf
     spinup: list = field(default_factory=list)
     profile: list = field(default_factory=list)  # dicts: what, ns
+    savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""
@@ -614,9 +615,10 @@ def realtime_factor(res: Results) -> None:
 def long_spinup(res: Results) -> None:
     """20-minute spin-up of the default scene without its controller, at each fidelity level.
 
-    Error estimate of the full model at its default knob from the run at half the step (order p of the
-    stepper: err(h) ≈ |y(h) − y(h/2)| · 2^p/(2^p − 1)); other levels against the run at half the step (of L
-    alone where they averaged the spin phase out).
+    The full model at its default knob and at half and a quarter of its step; the error of each estimated
+    from its distance to the finest (order p of the stepper, k halvings apart: err(h) ≈ |y(h) − y(h/2^k)| ·
+    2^{kp}/(2^{kp} − 1); the finest's own from the middle one: |y(h/2) − y(h/4)|/(2^p − 1)); other levels
+    against the finest run (of L alone where they averaged the spin phase out).
     """
     from .scene import load_scene
     from .simulate import DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN, Simulator, run
@@ -629,8 +631,9 @@ def long_spinup(res: Results) -> None:
     v0 = getattr(base.integrator, knob) or (DEFAULT_RATE_CHANGE if knob == "rate_change"
                                             else DEFAULT_STEPS_PER_TURN[method])
     v1 = refined(method, v0)
+    v2 = refined(method, v1)
     runs = {}
-    for v in (v0, v1):
+    for v in (v0, v1, v2):
         sc = load_scene("spinup_thin_shell", overrides={"duration": T, "controller": None,
                                                         f"integrator.{knob}": v})
         wall, cpu, r = _timed(lambda: run(sc), 0.0, 1)
@@ -638,9 +641,10 @@ def long_spinup(res: Results) -> None:
         _say(f"[spin-up {T:g} s] {_method_label('full')} {knob}={v:g}: wall {wall:.2f} s, cpu {cpu:.2f} s, "
              f"steps {r.steps}, "
              f"spin {r.spin_rate[-1] / (2 * math.pi):.2f} rev/s")
-    (w1, c1, r1), (w2, c2, r2) = runs[v0], runs[v1]
-    d = final_error(r1.L[-1], r1.q[-1], r2.L[-1], r2.q[-1])
-    dL = final_error(r1.L[-1], None, r2.L[-1], None)
+    r2 = runs[v2][2]  # the finest
+
+    def dist(r, Lonly=False):
+        return final_error(r.L[-1], None if Lonly else r.q[-1], r2.L[-1], None if Lonly else r2.q[-1])
     target = next((s.rate for s in base.stators if s.current > 0), float("nan"))
 
     def entry(method, setting, w, c, r, err, errL):
@@ -650,8 +654,16 @@ def long_spinup(res: Results) -> None:
                 "spin_fraction": float(r.spin_rate[-1] / target), "theta_deg": float(np.degrees(r.theta[-1]))}
 
     f = 2.0 ** ORDER[method]
-    res.spinup.append(entry(_method_label("full"), f"{knob}={v0:g}", w1, c1, r1, d * f / (f - 1), dL * f / (f - 1)))
-    res.spinup.append(entry(_method_label("full"), f"{knob}={v1:g}", w2, c2, r2, d / (f - 1), dL / (f - 1)))
+    for k, v in enumerate((v0, v1)):
+        g = f ** (2 - k)
+        w, c, r = runs[v]
+        res.spinup.append(entry(_method_label("full"), f"{knob}={v:g}", w, c, r, dist(r) * g / (g - 1),
+                                dist(r, True) * g / (g - 1)))
+    w, c, r = runs[v2]
+    r1 = runs[v1][2]
+    res.spinup.append(entry(_method_label("full"), f"{knob}={v2:g}", w, c, r,
+                            final_error(r1.L[-1], r1.q[-1], r.L[-1], r.q[-1]) / (f - 1),
+                            final_error(r1.L[-1], None, r.L[-1], None) / (f - 1)))
     for level in fidelity_levels():
         if level == "full":
             continue
@@ -669,6 +681,53 @@ def long_spinup(res: Results) -> None:
         res.spinup.append(e)
         _say(f"[spin-up {T:g} s] {_method_label(level)}: wall {w:.2f} s, averaged {e['averaged']:.1f} s, "
              f"error of L {e['error_L']:.1e}")
+
+
+SAVINGS = (
+    # (what the scene skips, overrides of the scene that skips it, the overrides that make it do that work,
+    #  what the comparison is)
+    ("stators that are off", {}, {"stators.0.current": 1e-15, "stators.1.current": 1e-15},
+     "z1, z2 at 1e-15 A (in the field sum: 3 phasors) against off"),
+    ("effects that are off", {}, {"effects": {"gas_drag": {"transverse": [0.0], "axial": [0.0]}}},
+     "gas drag with zero coefficients (effects on: frozen_flow does not apply) against none"),
+    ("eddy-mode states (quasi-static torque)", {"torque_model": "quasi_static"}, {"torque_model": "lag"},
+     "quasi_static (7 states, [K] (1.2)) against lag (10 states, [M] (2.15)): other physics, the same rotor; "
+     "the quasi-static torque grows with the slip without bound, so frozen_flow's step is shorter"),
+    ("output samples tied to the step", {}, {"output.rate": 1000.0},
+     "1000 Hz output against 50 Hz: each sample costs a torque evaluation and is a stop, so a step longer "
+     "than the sample spacing (frozen_flow's) is cut to it"),
+)
+
+
+def savings(res: Results) -> None:
+    """What skipping each unneeded piece is worth: the default scene (no controller, the comparison horizon)
+    with the saving and with the work it skips forced in, CPU time of each (least of the repeats), and the
+    cost of the Euler angles a run computes only when they are read."""
+    from .scene import load_scene
+    from .simulate import Simulator, run
+
+    cfg = res.config
+    T = cfg.horizon_of("spinup_thin_shell")
+    for what, skipping, forced, how in SAVINGS:
+        base = {"controller": None, **skipping}
+        rows = []
+        for ov in (base, {**base, **forced}):
+            sc = load_scene("spinup_thin_shell", overrides=ov)
+            w, c, r = _timed(lambda: run(sc, duration=T), cfg.min_wall, cfg.max_reps)
+            rows.append((c, int(r.steps), Simulator(sc)._method()))
+        (c0, n0, m0), (c1, n1, m1) = rows
+        res.savings.append({"what": what, "how": how, "horizon": T, "cpu": c0, "cpu_forced": c1, "steps": n0,
+                            "steps_forced": n1, "method": m0, "method_forced": m1, "ratio": c1 / c0})
+        _say(f"[savings] {what}: {c0 * 1e3:.2f} ms ({m0}, {n0} steps) against {c1 * 1e3:.2f} ms ({m1}, {n1} steps) "
+             f"= {c1 / c0:.2f}x ({how})")
+    sc = load_scene("spinup_thin_shell", overrides={"controller": None, "duration": 60.0})
+    _, c_run, r = _timed(lambda: run(sc), cfg.min_wall, cfg.max_reps)
+    _, c_eul, _ = _timed(lambda: replace(r, _euler=None).euler, cfg.min_wall, cfg.max_reps)
+    res.savings.append({"what": "Euler angles nobody reads", "how": "RunResult.euler computed on first access "
+                        f"(60 s, {r.t.size} samples) against the run itself", "horizon": 60.0, "cpu": c_run,
+                        "cpu_forced": c_run + c_eul, "steps": int(r.steps), "steps_forced": int(r.steps),
+                        "method": "", "method_forced": "", "ratio": (c_run + c_eul) / c_run})
+    _say(f"[savings] Euler angles: {c_eul * 1e3:.2f} ms on first access against {c_run * 1e3:.2f} ms for the run")
 
 
 def profile_kernels(res: Results) -> None:
@@ -710,16 +769,20 @@ def profile_kernels(res: Results) -> None:
 
         integ()
         t_step = min(_once(integ) for _ in range(3)) / k
+        t_ff = _frozen_flow_step_cost(sim, Bre, Bim, om)
         f = numpy_rhs(sim)
         m = 2000
         t_np = min(_once(lambda: [f(1e-3, y) for _ in range(m)]) for _ in range(3)) / m
         for what, sec in (("RHS, compiled (nonlinear_part_at)", t_rhs), ("field B, dB/dt (field_case)", t_field),
-                          ("ETDRK4 step (integrate_etd)", t_step), ("RHS, NumPy baseline", t_np)):
-            res.profile.append({"case": label, "what": what, "ns": sec * 1e9})
+                          ("ETDRK4 step (integrate_etd)", t_step), ("frozen_flow step (integrate_frozen)", t_ff),
+                          ("RHS, NumPy baseline", t_np)):
+            if math.isfinite(sec):
+                res.profile.append({"case": label, "what": what, "ns": sec * 1e9})
         res.profile.append({"case": label, "what": "ETDRK4 step / compiled RHS", "ns": t_step / t_rhs,
                             "unit": "ratio"})
         _say(f"[profile] {label}: RHS {t_rhs * 1e9:.0f} ns, field {t_field * 1e9:.0f} ns, "
-             f"step {t_step * 1e9:.0f} ns ({t_step / t_rhs:.2f} RHS), NumPy RHS {t_np * 1e9:.0f} ns")
+             f"step {t_step * 1e9:.0f} ns ({t_step / t_rhs:.2f} RHS), frozen_flow step {t_ff * 1e9:.0f} ns, "
+             f"NumPy RHS {t_np * 1e9:.0f} ns")
     # Python cost of one call of Simulator.advance (tiny span: one step)
     sim = Simulator(load_scene("spinup_thin_shell", overrides={"controller": None}))
     h = sim._max_step(False, "etdrk4")
@@ -728,6 +791,30 @@ def profile_kernels(res: Results) -> None:
     res.profile.append({"case": "spinup_thin_shell", "what": "Simulator.advance call of one step (Python + 1 step)",
                         "ns": t_adv * 1e9})
     _say(f"[profile] Simulator.advance of one step: {t_adv * 1e6:.1f} µs")
+
+
+def _frozen_flow_step_cost(sim, Bre, Bim, om) -> float:
+    """Seconds per frozen-flow step (``frozen_flow.integrate_frozen`` over 20 000 steps at the scene's
+    rate_change, else the default), NaN where the stepper does not apply."""
+    from . import effects, frozen_flow
+
+    ax = frozen_flow.supported(sim.J)
+    if ax < 0 or sim.eff[effects.ON] != 0.0:
+        return float("nan")
+    h = sim._frozen_flow_step()
+    if not math.isfinite(h):
+        return float("nan")
+    k = 20_000
+    stops, rec = np.array([k * h]), np.array([False])
+    oy, oN = np.zeros((1, sim.y.size)), np.zeros((1, 3))
+
+    def integ():
+        return frozen_flow.integrate_frozen(sim.y.copy(), 0.0, 0.0, stops, rec, h, Bre, Bim, om, sim.Jinv,
+                                            sim.J[(ax + 1) % 3], sim.J[ax], ax, sim.c_m, sim.w, sim.tail,
+                                            1.0 / sim.tau, oy, oN, 0, sim.eff)
+
+    integ()
+    return min(_once(integ) for _ in range(3)) / k
 
 
 _LOOPS: list = []
@@ -791,6 +878,7 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     if cfg.spinup_duration:
         long_spinup(res)
     if cfg.profile:
+        savings(res)
         profile_kernels(res)
     res.wall_total = time.perf_counter() - w0
     write_outputs(res, Path(out))
@@ -911,6 +999,14 @@ def versions() -> str:
             f"numba {numba.__version__}")
 
 
+def _table(title: str, columns: str, rows: list, after: Sequence[str] = ()) -> list:
+    """Markdown lines of a section: its title, a table with ``columns`` ("a | b | c") and ``rows`` (each
+    "x | y | z"), then ``after`` and a blank line."""
+    n = columns.count("|") + 1
+    return ([title, "", f"| {columns} |", "|" + "---|" * n] + [f"| {r} |" for r in rows]
+            + (["", *after] if after else []) + [""])
+
+
 def markdown(res: Results) -> str:
     cfg = res.config
     load = ""
@@ -959,44 +1055,43 @@ def markdown(res: Results) -> str:
                      f"| {r.error:.2e} | {r.error_L:.2e} | {r.rtf:.3g} | {note} |")
         L.append("")
     if res.modes:
-        L += ["## Cost of eddy modes", "",
-              "| scene | modes | method | setting | horizon s | CPU s | wall s | steps | RHS evaluations "
-              "| CPU ns per step | real-time factor |", "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for m in res.modes:
-            L.append(f"| {m['scene']} | {m['modes']} | {m['method']} | {m['setting']} | {m['horizon']:g} "
+        L += _table("## Cost of eddy modes", "scene | modes | method | setting | horizon s | CPU s | wall s | steps "
+                    "| RHS evaluations | CPU ns per step | real-time factor",
+                    [f"{m['scene']} | {m['modes']} | {m['method']} | {m['setting']} | {m['horizon']:g} "
                      f"| {m['cpu']:.4g} | {m['wall']:.4g} | {m['steps']} | {_fmt(m['rhs'], 'd')} "
-                     f"| {m['ns_per_step']:.4g} | {m['rtf']:.3g} |")
-        L.append("")
+                     f"| {m['ns_per_step']:.4g} | {m['rtf']:.3g}" for m in res.modes])
     if res.rtf:
-        L += ["## Real-time factor of the default scene", "",
-              "| scene | method | run | duration s | wall s | CPU s | steps | averaged s | real-time factor "
-              "| per CPU s | final spin rev/s | final θ deg | L vs full |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-        for r in res.rtf:
-            L.append(f"| {r['scene']} | {r['method']} | {r['what']} | {r['duration']:g} | {r['wall']:.3g} "
+        L += _table("## Real-time factor of the default scene", "scene | method | run | duration s | wall s | CPU s "
+                    "| steps | averaged s | real-time factor | per CPU s | final spin rev/s | final θ deg | L vs full",
+                    [f"{r['scene']} | {r['method']} | {r['what']} | {r['duration']:g} | {r['wall']:.3g} "
                      f"| {r['cpu']:.3g} | {r['steps']} | {r['averaged']:.3g} | {r['rtf']:.3g} | {r['rtf_cpu']:.3g} "
-                     f"| {r['spin_rev_s']:.2f} | {r['theta_deg']:.3g} | {_fmt(r['error_L'], '.1e')} |")
-        L.append("")
+                     f"| {r['spin_rev_s']:.2f} | {r['theta_deg']:.3g} | {_fmt(r['error_L'], '.1e')}" for r in res.rtf])
     if res.spinup:
-        L += ["## 20-minute spin-up (spinup_thin_shell, no controller)", "",
-              "| method | setting | duration s | wall s | CPU s | steps | averaged s | real-time factor "
-              "| error (L, q) | error of L | spin rev/s | spin / field rate | θ deg |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-        for s in res.spinup:
-            L.append(f"| {s['method']} | {s['setting']} | {s['duration']:g} | {s['wall']:.4g} | {s['cpu']:.4g} "
+        L += _table("## 20-minute spin-up (spinup_thin_shell, no controller)", "method | setting | duration s "
+                    "| wall s | CPU s | steps | averaged s | real-time factor | error (L, q) | error of L | spin rev/s "
+                    "| spin / field rate | θ deg",
+                    [f"{s['method']} | {s['setting']} | {s['duration']:g} | {s['wall']:.4g} | {s['cpu']:.4g} "
                      f"| {s['steps']} | {s['averaged']:.4g} | {s['rtf']:.3g} | {_fmt(s['error'], '.1e')} "
                      f"| {_fmt(s['error_L'], '.1e')} | {s['spin_rev_s']:.2f} | {s['spin_fraction']:.6f} "
-                     f"| {s['theta_deg']:.3g} |")
-        L += ["", "Errors of the full model at steps_per_turn = N are estimated from the run at 2N (order p of "
-              "the stepper: |y_N − y_2N| · 2^p/(2^p − 1)); other levels are compared with the 2N run (of L alone where they averaged "
-              "the spin phase out: their attitude is not a result there).", ""]
+                     f"| {s['theta_deg']:.3g}" for s in res.spinup],
+                    ["The full model runs at its default knob and at half and a quarter of its step; each error is "
+                     "estimated from the distance to the finest run (order p of the stepper, k halvings apart: "
+                     "|y − y_finest| · 2^{kp}/(2^{kp} − 1); the finest's own from the middle run: "
+                     "|y_mid − y_finest|/(2^p − 1)). The estimate assumes the asymptotic order; where the three "
+                     "errors do not fall by 2^p per halving, read it as a magnitude. Other levels are compared with "
+                     "the finest run (of L alone where they averaged the spin phase out: their attitude is not a "
+                     "result there)."])
+    if res.savings:
+        L += _table("## What skipping is worth (spinup_thin_shell, no controller; CPU s)", "the scene skips | compared "
+                    "| horizon s | CPU s (skipped) | stepper, steps | CPU s (done) | stepper, steps | ratio",
+                    [f"{v['what']} | {v['how']} | {v['horizon']:g} | {v['cpu']:.4g} | {v['method']} {v['steps']} "
+                     f"| {v['cpu_forced']:.4g} | {v['method_forced']} {v['steps_forced']} | {v['ratio']:.2f}"
+                     for v in res.savings])
     if res.profile:
-        L += ["## Where the time goes (compiled kernels; CPU ns, least of 3)", "", "| case | what | ns |",
-              "|---|---|---|"]
-        for p in res.profile:
-            val = f"{p['ns']:.2f} (ratio)" if p.get("unit") == "ratio" else f"{p['ns']:.4g}"
-            L.append(f"| {p['case']} | {p['what']} | {val} |")
-        L.append("")
+        L += _table("## Where the time goes (compiled kernels; CPU ns, least of 3)", "case | what | ns",
+                    [f"{p['case']} | {p['what']} | "
+                     + (f"{p['ns']:.2f} (ratio)" if p.get("unit") == "ratio" else f"{p['ns']:.4g}")
+                     for p in res.profile])
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"
