@@ -4,7 +4,8 @@
     gyro-sim scenes                 list the built-in scenes
     gyro-sim info BAG               topics, counts, duration, scene of a recorded run
     gyro-sim plot BAG [--out PNG]   spin rate, θ, L and stator currents of a recorded run
-    gyro-sim replay BAG [--rate F]  publish a bag over ROS 2 with its timing; --check re-simulates it
+    gyro-sim replay BAG [--rate F] [--wait-for-subscribers N]  publish a bag over ROS 2 with its timing;
+                                    --check re-simulates it
     gyro-sim phase SCENE|BAG        (θ, φ) phase portrait over the averaged ψ-switching model
     gyro-sim bench [--quick]        work-precision benchmark (table + PNG)
     gyro-sim sweep SCENE|SWEEP ...  parameter sweeps and Monte Carlo on Dask
@@ -87,6 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "recorded commands and report the largest difference (expected 0).")
     replay.add_argument("bag", metavar="BAG", type=Path)
     replay.add_argument("--rate", metavar="F", type=float, default=1.0, help="playback speed factor (default 1)")
+    replay.add_argument("--wait-for-subscribers", metavar="N", type=int, default=0,
+                        help="wait until N subscriptions (summed over the topics) are matched before publishing")
     replay.add_argument("--check", action="store_true", help="re-simulate instead of publishing")
     replay.set_defaults(func=_cmd_replay)
 
@@ -357,6 +360,8 @@ def _cmd_plot(args) -> int:
 def _cmd_replay(args) -> int:
     if not (math.isfinite(args.rate) and args.rate > 0):
         return _error(f"--rate {args.rate}: must be a positive number")
+    if args.wait_for_subscribers < 0:
+        return _error(f"--wait-for-subscribers {args.wait_for_subscribers}: must be an integer ≥ 0")
     if args.check:
         from gyro_sim.rerun import rerun_bag
         from gyro_sim.scene import SceneError
@@ -374,8 +379,8 @@ def _cmd_replay(args) -> int:
 
     from gyro_sim.ros.launch import ros_env
 
-    return subprocess.call([sys.executable, "-m", "gyro_sim.ros.replay", str(args.bag), repr(float(args.rate))],
-                           env=ros_env())
+    return subprocess.call([sys.executable, "-m", "gyro_sim.ros.replay", str(args.bag), repr(float(args.rate)),
+                            "--wait-for-subscribers", str(args.wait_for_subscribers)], env=ros_env())
 
 
 def _cmd_phase(args) -> int:

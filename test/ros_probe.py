@@ -2,7 +2,11 @@
 
     python ros_probe.py listen OUT.json SECONDS UNTIL TOPIC [...]  count messages (keep status texts) for at
                                                                    most SECONDS, or until every topic has UNTIL
-    python ros_probe.py bad_commands SECONDS                       publish malformed stator commands
+                                                                   (UNTIL 0 with /gyro/status: until the
+                                                                   simulator's "done:" status)
+    python ros_probe.py bad_commands SECONDS PERIOD                publish malformed stator commands every
+                                                                   PERIOD s (0: as fast as it can) until the
+                                                                   simulator is done (≤ SECONDS)
 """
 import json
 import sys
@@ -37,18 +41,29 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
         qos.depth = max(qos.depth, 10000)
         node.create_subscription(message_class(TOPICS[t]), t, cb(t), qos)
     open(out + ".ready", "w").close()  # subscriptions exist: the test may start publishers
+    def complete():
+        if until:
+            return all(n >= until for n in counts.values())
+        return any(t.startswith("done:") for t in texts)
+
     end = time.time() + seconds
-    while time.time() < end and not (until and all(n >= until for n in counts.values())):
+    while time.time() < end and not complete():
         rclpy.spin_once(node, timeout_sec=0.05)
     with open(out, "w") as f:
         json.dump({"counts": counts, "status": texts, "stamps": stamps}, f)
     node.destroy_node()
 
 
-def bad_commands(seconds: float) -> None:
+def bad_commands(seconds: float, period: float) -> None:
+    """Publish malformed commands every ``period`` s (0: a flood) until the simulator's "done:" status, at
+    most ``seconds``."""
     node = Node("gyro_bad_commander")
     cls = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
     pub = node.create_publisher(cls, TOPIC_STATOR_COMMANDS, qos_profile(TOPIC_STATOR_COMMANDS))
+    done = []
+    node.create_subscription(message_class(TOPICS[TOPIC_STATUS]), TOPIC_STATUS,
+                             lambda m: done.append(1) if m.data.startswith("done:") else None,
+                             qos_profile(TOPIC_STATUS))
     bad = [
         (["z1"], [float("nan")], [0.0]),  # NaN current
         (["z1"], [-1.0], [0.0]),  # negative current
@@ -57,12 +72,15 @@ def bad_commands(seconds: float) -> None:
         (["z1"], [1.0], [float("inf")]),  # infinite rate
     ]
     end = time.time() + seconds
-    while time.time() < end:
+    while time.time() < end and not done:
         for names, eff, vel in bad:
             m = cls()
             m.name, m.effort, m.velocity = names, eff, vel
             pub.publish(m)
-        rclpy.spin_once(node, timeout_sec=0.2)
+        burst = time.time() + period  # (spin_once returns at each status message: pace by the clock)
+        rclpy.spin_once(node, timeout_sec=0.0)
+        while time.time() < burst and not done:
+            rclpy.spin_once(node, timeout_sec=max(burst - time.time(), 0.0))
     node.destroy_node()
 
 
@@ -72,6 +90,6 @@ if __name__ == "__main__":
         if sys.argv[1] == "listen":
             listen(sys.argv[2], float(sys.argv[3]), int(sys.argv[4]), sys.argv[5:])
         else:
-            bad_commands(float(sys.argv[2]))
+            bad_commands(float(sys.argv[2]), float(sys.argv[3]))
     finally:
         rclpy.shutdown()

@@ -158,6 +158,15 @@ def test_duration_must_be_positive_seconds(capsys, bad):
     assert "duration" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv,fragment", [
+    (["--rate", "0"], "--rate 0.0: must be a positive number"),
+    (["--wait-for-subscribers", "-1"], "--wait-for-subscribers -1: must be an integer ≥ 0"),
+])
+def test_replay_refuses_bad_options_before_starting_ros(capsys, tmp_path, argv, fragment):
+    assert cli.main(["replay", str(tmp_path), *argv]) == 2
+    assert fragment in capsys.readouterr().err
+
+
 def test_parser_defaults():
     args = cli.build_parser().parse_args(["run", "x.yaml"])
     assert args.scene == "x.yaml"

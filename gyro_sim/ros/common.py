@@ -5,6 +5,7 @@ import importlib
 import math
 import signal
 import threading
+import time
 from typing import Callable, Optional
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -97,6 +98,40 @@ def node_main(who: str, build: Callable, loop: Callable, args=None) -> int:
             rclpy.shutdown()
 
 
+def wait_for_matches(node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0,
+                     at_least: int = 0) -> int:
+    """Wait until discovery has settled; returns the number of subscriptions matched to ``pubs`` (summed).
+
+    Settled: at least ``at_least`` subscriptions matched (summed over ``pubs``), every subscriber the graph
+    shows on their topics matched, and the graph unchanged for ``settle`` s (2 × ``settle`` while no
+    subscriber is seen: a busy machine can be slow to announce participants already running); at most
+    ``timeout`` s (wall) in all. Then ``settle`` s more: our writers may know a reader before that reader
+    knows them, and samples sent before it does are dropped for it (as ``ros2 bag play --delay``).
+
+    Messages published before a reliable subscriber is matched are lost to it: without this wait the first
+    samples of a run or a replay would be dropped for subscribers that are already running (the samples at
+    the end are kept by :func:`flush_publishers`).
+    """
+    pubs = list(pubs)
+    start = time.perf_counter()
+    last, since = None, start
+
+    def matched_count():
+        return sum(p.get_subscription_count() for p in pubs)
+
+    while time.perf_counter() - start < timeout and not stop.is_set():
+        seen = tuple(node.count_subscribers(p.topic_name) for p in pubs)
+        matched = all(p.get_subscription_count() >= n for p, n in zip(pubs, seen)) and matched_count() >= at_least
+        now = time.perf_counter()
+        if seen != last:
+            last, since = seen, now
+        elif matched and now - since >= (settle if any(seen) else 2 * settle):
+            break
+        time.sleep(0.05)
+    stop.wait(settle)
+    return matched_count()
+
+
 def flush_publishers(node, budget: float = 2.0) -> None:
     """Wait (at most ``budget`` s in all) until the readers have acknowledged every sample the node's reliable
     publishers sent: a node destroyed earlier drops its last samples (a replayed bag lost its last message
@@ -133,4 +168,4 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
 
 
 __all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "stop_on_signals", "node_main",
-           "flush_publishers", "stamp_ns"]
+           "flush_publishers", "wait_for_matches", "stamp_ns"]

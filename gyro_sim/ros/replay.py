@@ -5,6 +5,7 @@ or ``ros2 topic echo`` sees exactly what the simulator published.
 """
 from __future__ import annotations
 
+import math
 import sys
 import threading
 import time
@@ -15,38 +16,16 @@ from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 
 from ..messages import QOS, TOPICS
-from .common import flush_publishers, message_class, qos_profile, stop_on_signals
+from .common import flush_publishers, message_class, qos_profile, stop_on_signals, wait_for_matches
 
 
-def _wait_for_matches(node: Node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0) -> None:
-    """Wait until discovery has settled: every subscriber in the graph matched to our publishers and the
-    graph unchanged for ``settle`` s (2 × ``settle`` while no subscriber is seen; ≤ ``timeout``).
+def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wait_for: int = 0,
+           startup_timeout: float = 10.0) -> int:
+    """Publish the bag's messages in log-time order, paced to the wall clock × ``rate``. Returns the count.
 
-    Messages published before a reliable subscriber is matched are lost, so without this the first
-    samples of a replay would be dropped for subscribers that are already running (the samples at the
-    end are kept by :func:`flush_publishers`).
-    """
-    pubs = list(pubs)
-    start = time.perf_counter()
-    last, since = None, start
-    while time.perf_counter() - start < timeout and not stop.is_set():
-        seen = tuple(node.count_subscribers(p.topic_name) for p in pubs)
-        matched = all(p.get_subscription_count() >= n for p, n in zip(pubs, seen))
-        now = time.perf_counter()
-        if seen != last:
-            last, since = seen, now
-        elif matched and now - since >= (settle if any(seen) else 2 * settle):
-            # (no subscriber seen yet: give discovery longer, a busy machine can be slow to announce the
-            # participants that are already running)
-            break
-        time.sleep(0.05)
-    # our writers may know a reader before that reader knows them (its first samples would be dropped):
-    # give the other side of discovery time too, as `ros2 bag play --delay` does
-    stop.wait(settle)
-
-
-def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None) -> int:
-    """Publish the bag's messages in log-time order, paced to the wall clock × ``rate``. Returns the count."""
+    Before the first message, discovery is given time to settle (:func:`~.common.wait_for_matches`, at most
+    ``startup_timeout`` s), and at least ``wait_for`` subscriptions, summed over the bag's topics, must be
+    matched (unless that time runs out: then a warning, and the replay starts)."""
     stop = stop or threading.Event()
     node = Node("gyro_replay")
     try:
@@ -55,7 +34,10 @@ def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None) -> 
             for c in reader.connections:
                 qos = qos_profile(c.topic) if c.topic in QOS else 10
                 pubs[c.id] = node.create_publisher(message_class(c.msgtype), c.topic, qos)
-            _wait_for_matches(node, pubs.values(), stop)
+            seen = wait_for_matches(node, pubs.values(), stop, startup_timeout, at_least=wait_for)
+            if seen < wait_for:
+                node.get_logger().warning(f"--wait-for-subscribers {wait_for}: {seen} matched after "
+                                          f"{startup_timeout:g} s; replaying anyway")
             n = 0
             t0_log = None
             wall0 = time.perf_counter()
@@ -77,18 +59,42 @@ def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None) -> 
         node.destroy_node()
 
 
+def parse_args(argv):
+    """Arguments of ``python -m gyro_sim.ros.replay`` (argparse exits with status 2 and one line on bad input)."""
+    import argparse
+
+    def positive(text):
+        v = float(text)
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{text}: must be a positive number")
+        return v
+
+    def count(text):
+        v = int(text)
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"{text}: must be an integer ≥ 0")
+        return v
+
+    ap = argparse.ArgumentParser(prog="python -m gyro_sim.ros.replay", description="publish a bag over ROS 2")
+    ap.add_argument("bag", metavar="BAG")
+    ap.add_argument("rate", metavar="RATE", nargs="?", type=positive, default=1.0,
+                    help="playback speed factor (default 1)")
+    ap.add_argument("--wait-for-subscribers", metavar="N", type=count, default=0,
+                    help="wait until N subscriptions (summed over the topics) are matched before the first message")
+    ap.add_argument("--startup-timeout", metavar="S", type=positive, default=10.0,
+                    help="wall seconds to wait for discovery before the first message (default 10)")
+    return ap.parse_args(argv)
+
+
 def main(argv=None) -> int:
-    """``python -m gyro_sim.ros.replay BAG [RATE]``."""
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv:
-        print("usage: python -m gyro_sim.ros.replay BAG [RATE]", file=sys.stderr)
-        return 2
+    """``python -m gyro_sim.ros.replay BAG [RATE] [--wait-for-subscribers N] [--startup-timeout S]``."""
+    args = parse_args(sys.argv[1:] if argv is None else argv)
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     stop = threading.Event()
     restore = stop_on_signals(stop)
     try:
-        n = replay(argv[0], float(argv[1]) if len(argv) > 1 else 1.0, stop)
-        print(f"replay: published {n} messages from {argv[0]}", file=sys.stderr)
+        n = replay(args.bag, args.rate, stop, args.wait_for_subscribers, args.startup_timeout)
+        print(f"replay: published {n} messages from {args.bag}", file=sys.stderr)
         return 0
     finally:
         restore()

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -33,7 +33,7 @@ from ..messages import (TOPIC_CLOCK, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPI
                         stamp_ns, state_messages, status_message, to_ros)
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
-from .common import message_class, node_main, parse_command, qos_profile
+from .common import message_class, node_main, parse_command, qos_profile, wait_for_matches
 
 MODES = ("lockstep", "realtime", "freerun")
 STATE_TOPICS = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_CLOCK)
@@ -52,7 +52,10 @@ class SimulatorNode(Node):
         d("record", "", "bag directory to record to (empty = no recording)")
         d("watchdog_timeout", 2.0, "wall seconds without a command before the currents go to zero (0 = off)",
           (0.0, 3600.0))
-        d("startup_timeout", 30.0, "lockstep: wall seconds to wait for the first command", (0.0, 3600.0))
+        d("startup_timeout", 30.0, "wall seconds to wait for the first command (lockstep) or for the "
+          "subscribers of wait_for_subscribers (0 = no bound)", (0.0, 3600.0))
+        d("wait_for_subscribers", 0, "before the first step, wait (at most startup_timeout) until this many "
+          "subscriptions are matched to the node's topics, summed over the topics (0 = start at once)", (0, 10000))
         self.add_on_set_parameters_callback(self._on_set)
         err = self._check(self._params())
         if err:
@@ -71,13 +74,16 @@ class SimulatorNode(Node):
     # --- parameters --------------------------------------------------------------------------
     def _declare(self, name, default, description, rng=None):
         desc = ParameterDescriptor(description=description)
-        if rng is not None:
+        if isinstance(default, int):
+            desc.integer_range = [IntegerRange(from_value=rng[0], to_value=rng[1], step=1)]
+        elif rng is not None:
             desc.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1], step=0.0)]
         self.declare_parameter(name, default, desc)
 
     def _params(self) -> dict:
         return {p: self.get_parameter(p).value for p in ("scene", "mode", "rate_factor", "duration", "record",
-                                                         "watchdog_timeout", "startup_timeout")}
+                                                         "watchdog_timeout", "startup_timeout",
+                                                         "wait_for_subscribers")}
 
     def _check(self, p: dict) -> Optional[str]:
         if p["mode"] not in MODES:
@@ -146,7 +152,6 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     watchdog_fired = False
     latest = None  # latest valid command (names, current, rate, stamp_ns)
     refused = 0
-    wall0 = time.perf_counter()
     n_ticks = 0
 
     def status(text, warn=False):
@@ -155,6 +160,19 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
             recorder.write_status(runner.sim.t, text)
 
     last_published: dict = {}
+    refusals: dict = {}  # reason -> [wall time of its last report, refusals not reported since]
+
+    def report_refusal(why: str, wall: float) -> None:
+        """A refused command on /gyro/status: each reason at most once a second (wall), with the count of
+        the same refusals not reported since (a sender repeating a bad command at 1 kHz must not flood the
+        status topic, the log and this loop)."""
+        last = refusals.setdefault(why, [-math.inf, 0])
+        if wall - last[0] < 1.0:
+            last[1] += 1
+            return
+        more = f" ({last[1]} more like it since the last report)" if last[1] else ""
+        refusals[why] = [wall, 0]
+        status(f"refused command: {why}{more}", warn=True)
 
     def drain(block_until_ns: Optional[int], timeout: float):
         """Take commands off the queue; with block_until_ns, wait (≤ timeout) for that stamp.
@@ -165,9 +183,13 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
         nonlocal latest, last_cmd_wall, have_cmd, watchdog_fired, refused
         deadline = time.perf_counter() + timeout
         resend = time.perf_counter() + 0.5
+        queued = node.commands.qsize()  # without a wait, only what is queued now: a flood cannot stall the run
         while True:
             try:
                 if block_until_ns is None:
+                    if queued <= 0:
+                        return False
+                    queued -= 1
                     msg, wall = node.commands.get_nowait()
                 else:
                     left = deadline - time.perf_counter()
@@ -184,7 +206,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
             cmd, why = parse_command(msg, names)
             if cmd is None:
                 refused += 1
-                status(f"refused command: {why}", warn=True)
+                report_refusal(why, wall)
                 continue
             latest = cmd
             last_cmd_wall = wall
@@ -205,6 +227,14 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
             recorder.write_command(runner.sim.t, nm, cur, rate)
 
     try:
+        want = p["wait_for_subscribers"]
+        if want > 0:
+            node.get_logger().info(f"waiting for {want} subscription(s) to the simulator's topics")
+            seen = wait_for_matches(node, node.pubs.values(), stop, p["startup_timeout"] or math.inf, at_least=want)
+            if seen < want:
+                status(f"wait_for_subscribers = {want}: {seen} matched after {p['startup_timeout']:g} s "
+                       f"(startup_timeout); starting anyway", warn=True)
+        wall0 = last_cmd_wall = time.perf_counter()  # (the watchdog counts from the start of the run)
         status(f"simulator: scene {scene.name!r}, mode {mode}, duration {runner.T} s"
                + (f", recording to {p['record']}" if recorder else ""))
         while not runner.done and not stop.is_set():
