@@ -123,15 +123,20 @@ def done_figures(status: list) -> dict:
     return f
 
 
+def closed_loop(ros, bag: Path, scene: str, duration: float):
+    """The simulator and controller nodes over DDS in lockstep, recorded to ``bag``; (the bag's data, the
+    in-process run of the same scene)."""
+    sim = ros.simulator(scene=scene, duration=duration, record=bag)
+    ros.controller(scene=scene)
+    code, out = finish(sim)
+    assert code == 0, out
+    return read_bag(bag), gyro_sim.run(gyro_sim.load_scene(scene), duration=duration)
+
+
 def test_lockstep_closed_loop_over_dds_equals_in_process(ros, tmp_path):
     """ψ-switching over DDS in lockstep damps the nutation and gives the in-process run's numbers, bit for bit."""
     bag = tmp_path / "lock"
-    sim = ros.simulator(scene="nutation_oblate", duration=1.0, record=bag)
-    ros.controller(scene="nutation_oblate")
-    code, out = finish(sim)
-    assert code == 0, out
-    b = read_bag(bag)
-    r = gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=1.0)
+    b, r = closed_loop(ros, bag, "nutation_oblate", 1.0)
     for k in ("L", "q", "omega_b", "torque", "current"):
         a, c = getattr(r, k), getattr(b, k)
         assert a.shape == c.shape and np.array_equal(a, c), f"{k}: max |Δ| {np.max(np.abs(a - c))}"
@@ -147,13 +152,7 @@ def test_lockstep_closed_loop_over_dds_equals_in_process(ros, tmp_path):
 
 
 def test_spinup_over_dds_equals_in_process(ros, tmp_path):
-    bag = tmp_path / "spin"
-    sim = ros.simulator(scene="spinup_thin_shell", duration=4.0, record=bag)
-    ros.controller(scene="spinup_thin_shell")
-    code, out = finish(sim)
-    assert code == 0, out
-    b = read_bag(bag)
-    r = gyro_sim.run(gyro_sim.load_scene("spinup_thin_shell"), duration=4.0)
+    b, r = closed_loop(ros, tmp_path / "spin", "spinup_thin_shell", 4.0)
     assert np.array_equal(b.L, r.L) and np.array_equal(b.q, r.q)
     assert b.omega_b[-1, 2] > 20 * max(b.omega_b[1, 2], 1.0)
     print(f"\n  spin-up over DDS: Ω3 {b.omega_b[0, 2]:.2f} → {b.omega_b[-1, 2]:.2f} rad/s, identical to in-process")
