@@ -227,7 +227,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     while not r.done:
         if r.row > 0 and law is not None and r.is_control_tick:
             r.apply_commands(law(r.control_input()))
-        if r.row > 0 and not at_edge:
+        if r.row > 0 and not at_edge and scene.output.window_at(r.sim.t) is None:
             k, why = averaged_region(r)
             if k is not None:
                 nfev += _averaged_stretch(r, k, cmd_times, segments)
@@ -253,7 +253,7 @@ def _averaged_stretch(r: Runner, k: int, cmd_times: list, segments: list) -> int
     """Jump the runner over an averaged stretch to the next command (or the end). Returns RHS evaluations."""
     sim = r.sim
     t0 = sim.t
-    t1 = next((t for t in cmd_times if t > t0 + 1e-12), r.T)
+    t1 = min(next((t for t in cmd_times if t > t0 + 1e-12), r.T), r.scene.output.next_window_start(t0))
     model = _model(r, k)
     L0 = float(np.linalg.norm(sim.y[0:3]))
     theta0 = r.control_input().theta
@@ -335,15 +335,16 @@ def _m_stretch(r: Runner, model: AveragedM, segments: list) -> int:
     Returns RHS evaluations."""
     sim = r.sim
     t0 = sim.t
-    rows = np.nonzero(r.t_out > t0 + 1e-12)[0]
+    t_end = min(r.T, r.scene.output.next_window_start(t0))
+    rows = np.nonzero((r.t_out > t0 + 1e-12) & (r.t_out <= t_end))[0]
     y0 = slow_state(sim)
     atol = np.array([1e-12 * max(y0[0], 1e-300), 1e-12, 1e-12, 1e-12])
-    sol = solve_ivp(model.rhs, (t0, r.T), y0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
+    sol = solve_ivp(model.rhs, (t0, t_end), y0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
                     dense_output=True, events=model.exit_events(MU_MAX))
     if sol.status < 0:
         raise RuntimeError(f"[M] averaged model: integration failed: {sol.message}")
     exits = [(float(te[0]), ye[0]) for te, ye in zip(sol.t_events, sol.y_events) if te.size]
-    t1, y1 = min(exits, key=lambda e: e[0]) if exits else (r.T, sol.y[:, -1])
+    t1, y1 = min(exits, key=lambda e: e[0]) if exits else (t_end, sol.sol(t_end))
     n = int(np.count_nonzero(r.t_out[rows] <= t1 + 1e-12 * max(1.0, t1)))
     rows = rows[:n]
     if n:

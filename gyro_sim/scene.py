@@ -36,7 +36,10 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       theta: 0.0
       phi: 0.0
     duration: 60.0                   # s
-    output: {rate: 100.0}            # samples per second of simulated time
+    output:
+      rate: 100.0                    # samples per second of simulated time
+      windows:                       # optional stretches sampled faster (full model there, see fidelity)
+        - {start: 30.0, end: 30.5, rate: 10000.0}   # s, s, samples per second
     integrator:
       method: auto                   # lawson8 | etdrk4 | frozen_flow | auto: frozen_flow where it applies
                                      # and pays, else lawson8 unless an eddy mode is stiff (h > 2τ_n), then
@@ -85,6 +88,7 @@ class SceneError(ValueError):
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+MAX_WINDOW_SAMPLES = 1e7  # output samples one window may ask for (memory: ~1 kB each with 50 modes)
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
 
@@ -185,8 +189,52 @@ class Initial(_Strict):
         return self
 
 
+class OutputWindow(_Strict):
+    """A stretch [start, end] (s) sampled at ``rate`` (samples per simulated second) on top of the scene's
+    rate. ``fidelity: auto`` runs the full model inside it (the detail was asked for)."""
+
+    start: NonNegative
+    end: Positive
+    rate: Positive
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "OutputWindow":
+        if not self.end > self.start:
+            raise ValueError(f"end = {self.end}: must be greater than start = {self.start}")
+        if (self.end - self.start) * self.rate > MAX_WINDOW_SAMPLES:
+            raise ValueError(f"rate = {self.rate}: {(self.end - self.start) * self.rate:.3g} samples in "
+                             f"[{self.start}, {self.end}] s; at most {MAX_WINDOW_SAMPLES:.0e} a window")
+        return self
+
+
 class Output(_Strict):
     rate: Positive = 100.0
+    windows: list[OutputWindow] = []
+
+    def sample_times(self, T: float) -> np.ndarray:
+        """All output instants in [0, T] (s, sorted, unique): every 1/rate, T itself, and the windows' samples."""
+        dt = 1.0 / self.rate
+        t = np.arange(int(math.floor(T / dt + 1e-9)) + 1) * dt
+        if t[-1] < T * (1 - 1e-12):
+            t = np.append(t, T)
+        for w in self.windows:
+            if w.start < T:
+                end = min(w.end, T)
+                n = int(math.floor((end - w.start) * w.rate + 1e-9))
+                tw = w.start + np.arange(n + 1) / w.rate
+                # a window sample within round-off of a regular one is that one (no near-duplicate rows)
+                i = np.clip(np.searchsorted(t, tw), 1, t.size - 1)
+                near = np.minimum(np.abs(t[i] - tw), np.abs(t[i - 1] - tw)) <= 1e-9 * np.maximum(1.0, tw)
+                t = np.union1d(t, tw[~near])
+        return t
+
+    def window_at(self, t: float) -> Optional["OutputWindow"]:
+        """The window holding time t (s) with its end excluded, or None."""
+        return next((w for w in self.windows if w.start <= t < w.end), None)
+
+    def next_window_start(self, t: float) -> float:
+        """The first window start after t (s), or inf."""
+        return min((w.start for w in self.windows if w.start > t), default=math.inf)
 
 
 class Integrator(_Strict):

@@ -467,12 +467,9 @@ class Runner:
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
         self.scene, self.T = scene, T
         self.sim = Simulator(scene)
-        dt_out = 1.0 / scene.output.rate
-        t_out = np.arange(int(math.floor(T / dt_out + 1e-9)) + 1) * dt_out
-        if t_out[-1] < T * (1 - 1e-12):
-            t_out = np.append(t_out, T)
+        t_out = scene.output.sample_times(T)
         ctl = scene.controller
-        self.period = (ctl.period or dt_out) if ctl is not None else None
+        self.period = (ctl.period or 1.0 / scene.output.rate) if ctl is not None else None
         ticks = np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if ctl is not None else np.zeros(0)
         self._ticks = set(ticks.tolist())
         # every controller tick is an output sample too: the controller (node) sees the published state

@@ -143,3 +143,24 @@ def test_m_stretch_exit_between_samples_and_exact_torque():
           f"rates: {worst:.1e} (tol 1e-6)")
     assert t_dense < 10.0 and t_sparse == pytest.approx(t_dense, rel=1e-9, abs=1e-9)
     assert worst < 1e-6
+
+
+def test_output_window_runs_the_full_model_inside_auto():
+    """A 5 kHz output window at 30–30.2 s of the default scene: `auto` leaves the averaged model at its start,
+    runs the full model through it (every sample of the window within the full model's ripple of the full run)
+    and goes back to the averaged model after it."""
+    win = {"rate": 50.0, "windows": [{"start": 30.0, "end": 30.2, "rate": 5000.0}]}
+    full = gyro_sim.run(spinup(output=win))
+    hy = gyro_sim.run(spinup(output=win, fidelity="auto"))
+    assert np.array_equal(full.t, hy.t)
+    m = (hy.t >= 30.0) & (hy.t <= 30.2)
+    eL = float(np.max(np.linalg.norm(full.L[m] - hy.L[m], axis=1)) / np.linalg.norm(full.L[m][0]))
+    eth = float(np.max(np.abs(full.theta[m] - hy.theta[m])))
+    segs = hy.averaged_segments
+    print(f"\nwindow: {m.sum()} samples; averaged {[(round(a, 3), round(b, 3)) for a, b in segs]}; "
+          f"in the window max |ΔL|/|L| {eL:.1e}, max |Δθ| {eth:.1e} rad (tolerance 1e-4, 1e-5)")
+    assert m.sum() == 1001 and np.allclose(np.diff(hy.t[m]), 2e-4)
+    assert any(b == pytest.approx(30.0) for _, b in segs) and any(a == pytest.approx(30.2) for a, _ in segs)
+    assert not any(a < 30.2 - 1e-9 and b > 30.0 + 1e-9 for a, b in segs)  # no averaging inside
+    # ψ, φ are known from the window's second sample on (its first, t = 30 s, ends the averaged stretch)
+    assert np.all(np.isfinite(hy.euler[m & (hy.t > 30.0)])) and eL < 1e-4 and eth < 1e-5

@@ -1,6 +1,8 @@
 """Scene loading: built-in scenes validate; a wrong scene is refused with one clear message."""
 import copy
+import math
 
+import numpy as np
 import pytest
 import yaml
 
@@ -132,3 +134,21 @@ def test_overrides_apply_before_validation():
     assert s.initial.theta == 0.2 and s.stators[2].current == 0.5
     with pytest.raises(SceneError, match="initial.theta"):
         load_scene("spinup_thin_shell", overrides={"initial.theta": -1})
+
+
+def test_output_window_refused_when_empty_or_huge():
+    refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 2.0, "end": 1.0, "rate": 1000.0}]}),
+           "output.windows.0", "end = 1.0", "greater than start = 2.0")
+    refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 0.0, "end": 100.0, "rate": 1e6}]}),
+           "output.windows.0", "rate = 1000000.0", "at most")
+    refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 0.0, "end": 1.0}]}), "output.windows.0.rate", "missing")
+
+
+def test_output_window_samples_join_the_regular_ones():
+    s = scene_from_dict(mutate("output", {"rate": 10.0, "windows": [{"start": 0.25, "end": 0.3, "rate": 100.0}]}))
+    t = s.output.sample_times(1.0)
+    assert np.allclose(np.diff(t[t <= 0.2]), 0.1) and np.all(np.diff(t) > 0)
+    inside = t[(t >= 0.25) & (t <= 0.3 + 1e-12)]
+    assert inside.size == 6 and np.allclose(np.diff(inside), 0.01)
+    assert s.output.window_at(0.27) is s.output.windows[0] and s.output.window_at(0.3) is None
+    assert s.output.next_window_start(0.0) == 0.25 and s.output.next_window_start(0.25) == math.inf
