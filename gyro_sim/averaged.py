@@ -48,6 +48,7 @@ __all__ = [
     "k_e_of_scene",
     "gamma_k",
     "k21_rhs",
+    "k21_torque",
     "K21Model",
     "K21Result",
     "nutation_k22",
@@ -153,6 +154,20 @@ def _unit(L):
 # ----------------------------------------------------------------------------------------
 # [K] (2.1): three (any number of) stators at constant rates
 # ----------------------------------------------------------------------------------------
+def k21_torque(L, theta, J, kappa, axes, c, rates) -> np.ndarray:
+    """The averaged torque of [K] (2.1), dL/dt = Σ_k c_k [ν_k u_k − ½ γΛ (y3 + a_3k u_k)] (N·m, case frame).
+
+    L (3,) or (n, 3) case frame (N·m·s), θ scalar or (n,) rad; J, κ, axes (k, 3), c (k,) N·m·s and
+    rates (k,) rad/s as in :func:`k21_rhs`. Vectorised over rows (the output samples of an averaged stretch).
+    """
+    L = np.asarray(L, dtype=float)
+    Ln = np.linalg.norm(L, axis=-1, keepdims=True)
+    y3 = np.divide(L, Ln, out=np.broadcast_to([0.0, 0.0, 1.0], L.shape).copy(), where=Ln > 0)
+    g = np.asarray(gamma_k(theta, kappa))[..., None]
+    a3 = y3 @ axes.T  # (…, k)
+    return (c * rates) @ axes - 0.5 * g * (Ln / J) * (np.sum(c) * y3 + (c * a3) @ axes)  # [K] (2.1)
+
+
 def k21_rhs(t, x, J, kappa, delta, axes, c, rates, control=None):
     """Right-hand side of [K] (2.1) in SI, vector form (any stator axes).
 
@@ -180,8 +195,7 @@ def k21_rhs(t, x, J, kappa, delta, axes, c, rates, control=None):
     y3 = _unit(L)
     Lam = Ln / J
     a3 = axes @ y3
-    g = gamma_k(th, kappa)
-    dL = (c * rates) @ axes - 0.5 * g * Lam * (np.sum(c) * y3 + (c * a3) @ axes)
+    dL = k21_torque(L, th, J, kappa, axes, c, rates)
     g2 = float(np.sum(c / J * (3.0 - a3 * a3)))
     s, co = math.sin(th), math.cos(th)
     k1 = kappa / (1.0 + kappa)

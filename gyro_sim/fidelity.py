@@ -29,6 +29,11 @@ non-resonant torque harmonics, short eddy transient; any θ). ``auto`` hands ove
 [K] spin-up model does not apply and runs it to the end, or back to the full model at the instant
 its solution leaves the region (:meth:`AveragedM.exit_events`) (L from (|L|, ρ, σ), attitude at ψ = φ = 0, eddy modes at
 their steady response along the free motion: :func:`gyro_sim.frozen_flow.steady_modes`).
+
+The third is [K]'s (:mod:`gyro_sim.slow_k`: (2.1) in vector form with the (3.3) drive of ψ-switching) for an
+axisymmetric rotor under the quasi-static eddy torque, any stators at held commands or the ``psi_switching``
+law, where :meth:`SlowK.check` holds (ε ≤ ``MU_MAX``, non-resonant torque harmonics, θ away from the pole under
+ψ-switching). Inside an output window (``output.windows``) ``auto`` runs the full model.
 """
 from __future__ import annotations
 
@@ -41,13 +46,16 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .averaged_m import AveragedM, averaged_m_model
-from .frames import attitude_from_euler, quat_to_matrix
+from .slow_k import ENTER_MARGIN, SlowK, slow_k_of
+from .slow_k import slow_state as slow_k_state
+from .frames import attitude_from_euler, nutation_angle, quat_to_matrix
 from .scene import Scene, SceneError
 from .simulate import RunResult, Runner
 
 THETA_MAX = 0.1  # rad
 RHO_MAX = 1e-3  # rad
 MU_MAX = 1e-3
+RECHECK = 0.01  # the regions are tested again after this fraction of the slow time |L|/|N|
 
 
 @dataclass(frozen=True)
@@ -213,40 +221,72 @@ def _handover_to_full(runner: Runner, k: int, L: float, theta: float) -> None:
 
 
 def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
-    """``fidelity: auto`` (and ``averaged``): full model where needed, the averaged model elsewhere."""
+    """``fidelity: auto`` (and ``averaged``): full model where needed, the averaged model elsewhere.
+
+    The regions are tested where the commands change and otherwise every ``RECHECK`` of the slow time
+    |L|/|N| (they move with the slow variables); between tests the full model runs its output samples
+    inside one compiled call. After an [M] or [K] stretch that ended at its region's edge the full model
+    runs that long before the next test.
+    """
     from gyro_ctl.laws import make_law
 
-    r = Runner(scene, duration)
+    r = Runner(scene, duration, sample_breaks=False)
+    sim = r.sim
     law = make_law(scene.controller) if scene.controller is not None else None
     strict = scene.fidelity == "averaged"
     w0 = time.perf_counter()
     cmd_times = sorted({c.time for c in scene.commands if c.time < r.T})
     segments = []  # (t0, t1) of averaged stretches
     nfev = 0
-    at_edge = False  # an [M] stretch just ended at its region's edge: the full model takes a break first
+    next_test, tested_cmd = -math.inf, None
     while not r.done:
         if r.row > 0 and law is not None and r.is_control_tick:
             r.apply_commands(law(r.control_input()))
-        if r.row > 0 and not at_edge and scene.output.window_at(r.sim.t) is None:
-            k, why = averaged_region(r)
-            if k is not None:
-                nfev += _averaged_stretch(r, k, cmd_times, segments)
-                continue
-            m, why_m = m_region(r)
-            if m is not None:
-                nfev += _m_stretch(r, m, segments)
-                at_edge = True
-                continue
-            if strict and not segments:
-                raise SceneError(f"fidelity = 'averaged': the averaged model does not hold at t = {r.sim.t:g} s: "
-                                 f"{why}; [M]'s averaged model: {why_m}; use fidelity: auto or full")
-        at_edge = False
-        r.advance()
+        until = None
+        win = scene.output.window_at(sim.t) if r.row > 0 else None
+        if win is not None:
+            until = win.end
+        elif r.row > 0:
+            cmd = (sim.current.tobytes(), sim.rate.tobytes())
+            if sim.t >= next_test or cmd != tested_cmd:
+                k, why = averaged_region(r)
+                if k is not None:
+                    nfev += _averaged_stretch(r, k, cmd_times, segments)
+                    continue
+                m, why_m = m_region(r)
+                if m is not None:
+                    nfev += _m_stretch(r, m, segments)
+                    next_test, tested_cmd = sim.t + _recheck(sim), (sim.current.tobytes(), sim.rate.tobytes())
+                    continue
+                kk, why_k = k_region(r)
+                if kk is not None:
+                    nfev += _k_stretch(r, kk, cmd_times, segments)
+                    if law is not None and not r.is_control_tick:  # commands that fit the rebuilt state
+                        r.apply_commands(law(r.control_input()))
+                    next_test, tested_cmd = sim.t + _recheck(sim), (sim.current.tobytes(), sim.rate.tobytes())
+                    continue
+                if strict and not segments:
+                    raise SceneError(f"fidelity = 'averaged': the averaged model does not hold at t = {sim.t:g} s: "
+                                     f"{why}; [M]'s averaged model: {why_m}; [K]'s averaged model: {why_k}; "
+                                     "use fidelity: auto or full")
+                next_test, tested_cmd = sim.t + _recheck(sim), cmd
+            until = min(next_test, scene.output.next_window_start(sim.t))
+        if until is not None and r.row < r.t_out.size:
+            until = max(until, float(r.t_out[r.row]))  # at least to the next sample: never a step of zero
+        r.advance(until=until)
     res = r.result()
     res.wall_time = time.perf_counter() - w0
     res.averaged_segments = segments  # RunResult.euler: ψ, φ NaN there (averaged out)
     res.averaged_rhs_evaluations = nfev
     return res
+
+
+def _recheck(sim) -> float:
+    """Simulated time (s) until the regions are tested again: ``RECHECK`` × the slow time |L|/|N|; 0 (the next
+    sample) at rest or without torque (e.g. at the switch-on, before the eddy currents build up)."""
+    L, N = sim.y[0:3], sim.torque()
+    n = math.sqrt(float(N @ N))
+    return RECHECK * math.sqrt(float(L @ L)) / n if n > 0 else 0.0
 
 
 def _averaged_stretch(r: Runner, k: int, cmd_times: list, segments: list) -> int:
@@ -299,11 +339,8 @@ def slow_state(sim) -> np.ndarray:
     """[M]'s slow variables (|L| N·m·s, ρ, σ, θ rad) of a simulator's present state (case-frame L; θ the
     angle between the body's x3 and L)."""
     L = sim.y[0:3]
-    Ln = math.sqrt(float(L @ L))
-    x3 = quat_to_matrix(sim.y[3:7])[:, 2]
-    cos_th = float(x3 @ L) / Ln if Ln > 0 else 1.0
-    return np.array([Ln, math.atan2(math.hypot(L[0], L[1]), L[2]), math.atan2(L[1], L[0]),
-                     math.acos(max(-1.0, min(1.0, cos_th)))])
+    return np.array([math.sqrt(float(L @ L)), math.atan2(math.hypot(L[0], L[1]), L[2]), math.atan2(L[1], L[0]),
+                     nutation_angle(sim.y[3:7], L)])
 
 
 def m_region(runner: Runner) -> tuple[Optional[AveragedM], str]:
@@ -365,13 +402,71 @@ def _m_stretch(r: Runner, model: AveragedM, segments: list) -> int:
 def _m_handover_to_full(sim, y_slow: np.ndarray) -> None:
     """The full state from [M]'s slow variables: L, the attitude at ψ = φ = 0, each eddy mode at its steady
     response to the field along the free motion (:func:`gyro_sim.frozen_flow.steady_modes`)."""
-    from . import frozen_flow
-
     Lc, q = _m_outputs(*(np.atleast_1d(v) for v in y_slow))
     sim.y[0:3], sim.y[3:7] = Lc[0], q[0]
+    _steady_modes(sim)
+
+
+def _steady_modes(sim) -> None:
+    """Set each eddy mode of an axisymmetric rotor to its steady response to the present field along the
+    free motion of the present (L, attitude) (:func:`gyro_sim.frozen_flow.steady_modes`); none for the
+    quasi-static torque."""
+    from . import frozen_flow
+
     if sim.tau.size:
         ax = frozen_flow.supported(sim.J)
-        ax = 2 if ax < 0 else ax  # [M]'s region takes J1 = J2 to 1e-9: the polar axis x3
+        ax = 2 if ax < 0 else ax  # the averaged regions take J1 = J2 to 1e-9: the polar axis x3
         Bre, Bim, om = sim.phasors()
         sim.y[7:7 + 3 * sim.tau.size] = frozen_flow.steady_modes(
             sim.y, Bre, Bim, om, sim.J[(ax + 1) % 3], sim.J[ax], ax, 1.0 / sim.tau, sim.w, sim.c_m, sim.tail).ravel()
+
+
+# ------------------------------------------------------------------------------------------------
+# [K]'s averaged model in the hybrid
+# ------------------------------------------------------------------------------------------------
+def k_region(runner: Runner) -> tuple[Optional[SlowK], str]:
+    """([K]'s averaged model, '') if it holds at the runner's present state and commands, else (None, why)."""
+    cache = runner.__dict__.setdefault("_slow_k", {})
+    key = (runner.sim.current.tobytes(), runner.sim.rate.tobytes())
+    if key not in cache:
+        cache[key] = slow_k_of(runner)
+    model, why = cache[key]
+    if model is None:
+        return None, why
+    ok, why = model.check(slow_k_state(runner.sim), margin=ENTER_MARGIN)
+    return (model, "") if ok else (None, why)
+
+
+def _k_stretch(r: Runner, model: SlowK, cmd_times: list, segments: list) -> int:
+    """Jump the runner over a stretch of [K]'s averaged model: to the next command, output window or the end,
+    or to the instant its solution leaves the region (a solve_ivp event); there back to the full model
+    (L, θ kept, ψ = φ = 0, eddy modes at their steady response). Returns RHS evaluations."""
+    sim = r.sim
+    t0 = sim.t
+    t_end = min(next((t for t in cmd_times if t > t0 + 1e-12), r.T), r.scene.output.next_window_start(t0))
+    rows = np.nonzero((r.t_out > t0 + 1e-12) & (r.t_out <= t_end))[0]
+    x0 = slow_k_state(sim)
+    atol = np.array([1e-12 * float(np.linalg.norm(x0[0:3]))] * 3 + [1e-12])
+    sol = solve_ivp(model.rhs, (t0, t_end), x0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
+                    dense_output=True, events=model.exit_event())
+    if sol.status < 0:
+        raise RuntimeError(f"[K] averaged model: integration failed: {sol.message}")
+    t1, x1 = (float(sol.t_events[0][0]), sol.y_events[0][0]) if sol.t_events[0].size else (t_end, sol.sol(t_end))
+    n = int(np.count_nonzero(r.t_out[rows] <= t1 + 1e-12 * max(1.0, t1)))
+    rows = rows[:n]
+    if n:
+        X = sol.sol(r.t_out[rows])
+        L, th = X[0:3].T, X[3]
+        _write_averaged_rows(r, rows, L, _k_attitude(L, th), model.torque(L, th))
+    _jump(r, n, t0, t1)
+    segments.append((t0, t1))
+    sim.y[0:3], sim.y[3:7] = x1[0:3], _k_attitude(x1[None, 0:3], x1[3:4])[0]
+    _steady_modes(sim)
+    r.apply_scene_commands()
+    return int(sol.nfev)
+
+
+def _k_attitude(L: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Attitude (n, 4) at ψ = φ = 0 for case-frame L (n, 3) and θ (n,): the L-frame turned by θ about y1."""
+    Ln = np.linalg.norm(L, axis=1)
+    return _m_outputs(Ln, np.arctan2(np.hypot(L[:, 0], L[:, 1]), L[:, 2]), np.arctan2(L[:, 1], L[:, 0]), theta)[1]

@@ -16,6 +16,8 @@ Vectorised NumPy functions take arrays with the vector index last.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -114,3 +116,13 @@ def attitude_from_euler(L_direction: np.ndarray, psi: float, theta: float, phi: 
     """Quaternion (body → case) of the body at Euler angles (ψ, θ, φ) in the L-frame of a direction."""
     Y = l_frame(np.asarray(L_direction, dtype=float))
     return matrix_to_quat(Y @ rot_z(psi) @ rot_x(theta) @ rot_z(phi))
+
+
+def nutation_angle(q: np.ndarray, L: np.ndarray) -> float:
+    """θ (rad, 0…π): the angle between the body's polar axis x3 (q: body → case) and L (case frame);
+    0 for L = 0."""
+    Ln = math.sqrt(float(L @ L))
+    if Ln == 0.0:
+        return 0.0
+    c = float(quat_to_matrix(q)[:, 2] @ L) / Ln
+    return math.acos(max(-1.0, min(1.0, c)))
