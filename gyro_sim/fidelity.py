@@ -55,7 +55,7 @@ from .simulate import RunResult, Runner
 THETA_MAX = 0.1  # rad
 RHO_MAX = 1e-3  # rad
 MU_MAX = 1e-3
-RECHECK = 0.01  # the regions are tested again after this fraction of the slow time |L|/|N|
+RECHECK = 0.1  # the regions are tested again after this fraction of the slow time |L|/|N|
 
 
 @dataclass(frozen=True)
@@ -271,8 +271,8 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
                                      "use fidelity: auto or full")
                 next_test, tested_cmd = sim.t + _recheck(sim), cmd
             until = min(next_test, scene.output.next_window_start(sim.t))
-        if until is not None and r.row < r.t_out.size:
-            until = max(until, float(r.t_out[r.row]))  # at least to the next sample: never a step of zero
+        if until is not None and until <= sim.t + 1e-12 * max(1.0, sim.t):  # never an advance of zero
+            until = float(r.t_out[r.row]) if r.row < r.t_out.size else None
         r.advance(until=until)
     res = r.result()
     res.wall_time = time.perf_counter() - w0

@@ -119,10 +119,12 @@ def attitude_from_euler(L_direction: np.ndarray, psi: float, theta: float, phi: 
 
 
 def nutation_angle(q: np.ndarray, L: np.ndarray) -> float:
-    """θ (rad, 0…π): the angle between the body's polar axis x3 (q: body → case) and L (case frame);
-    0 for L = 0."""
-    Ln = math.sqrt(float(L @ L))
-    if Ln == 0.0:
+    """θ (rad, 0…π): the angle between the body's polar axis x3 (q = (w, x, y, z): body → case) and L (case
+    frame); 0 for L = 0. Scalar code (a region test calls it at every check)."""
+    w, x, y, z = (float(v) for v in q)
+    a = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))  # x3 in the case frame
+    L0, L1, L2 = (float(v) for v in L)
+    if L0 == 0.0 and L1 == 0.0 and L2 == 0.0:
         return 0.0
-    c = float(quat_to_matrix(q)[:, 2] @ L) / Ln
-    return math.acos(max(-1.0, min(1.0, c)))
+    c0, c1, c2 = a[1] * L2 - a[2] * L1, a[2] * L0 - a[0] * L2, a[0] * L1 - a[1] * L0
+    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a[0] * L0 + a[1] * L1 + a[2] * L2)
