@@ -59,6 +59,8 @@ __all__ = [
 ]
 
 DEFAULT_SCENES = ("spinup_thin_shell", "spinup_solid_sphere")
+# one scene (or two) for each averaged model: the spin-up model, [M]'s, [K]'s (three stators, ψ-switching)
+AVERAGED_SCENES = ("spinup_thin_shell", "constant_field", "rotating_field", "three_stators", "nutation_slow")
 TARGET_ERROR = 1e-6
 OURS = "gyro_sim"  # method label prefix of the project's integrator
 #: right-hand-side evaluations per step (frozen_flow: its two closed-form passes)
@@ -428,6 +430,7 @@ class BenchConfig:
     rtf_scene: Optional[str] = "spinup_thin_shell"
     rtf_duration: Optional[float] = None  # None: the scene's duration
     spinup_duration: Optional[float] = None  # the 20-minute spin-up (full mode): 1200 s
+    averaged_scenes: tuple = AVERAGED_SCENES  # fidelity auto against full on the scenes of each averaged model
     profile: bool = True
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
@@ -472,6 +475,7 @@ class Results:
     spinup: list = field(default_factory=list)
     profile: list = field(default_factory=list)  # dicts: what, ns
     savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
+    averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""
@@ -683,6 +687,30 @@ def long_spinup(res: Results) -> None:
              f"error of L {e['error_L']:.1e}")
 
 
+def averaged_models(res: Results) -> None:
+    """Each averaged model where it applies: ``fidelity: auto`` against ``full`` on scenes as shipped (whole
+    duration, controllers on), wall time of each (least of the repeats), the time averaged and by which model,
+    and the final errors of auto against full: L (relative, vector), spin (relative), θ (rad)."""
+    from .scene import load_scene
+    from .simulate import run
+
+    cfg = res.config
+    for name in cfg.averaged_scenes:
+        sc = load_scene(name, overrides={"fidelity": "full"})
+        wf, cf, f = _timed(lambda: run(sc), cfg.min_wall, cfg.max_reps)
+        sa = sc.model_copy(update={"fidelity": "auto"})
+        wa, ca, a = _timed(lambda: run(sa), cfg.min_wall, cfg.max_reps)
+        e = {"scene": name, "duration": sc.duration, "models": ", ".join(sorted(set(a.averaged_models))) or "none",
+             "averaged": _averaged_time(a), "wall_full": wf, "wall_auto": wa, "cpu_full": cf, "cpu_auto": ca,
+             "speedup": cf / ca, "error_L": final_error(a.L[-1], None, f.L[-1], None),
+             "error_spin": float(abs(a.spin_rate[-1] / f.spin_rate[-1] - 1)),
+             "error_theta": float(abs(a.theta[-1] - f.theta[-1]))}
+        res.averaged.append(e)
+        _say(f"[averaged] {name} {sc.duration:g} s: {e['models']} over {e['averaged']:.3g} s; CPU full {cf:.3g} s, "
+             f"auto {ca:.3g} s ({e['speedup']:.1f}x); L {e['error_L']:.1e}, spin {e['error_spin']:.1e}, "
+             f"θ {e['error_theta']:.1e} rad")
+
+
 SAVINGS = (
     # (what the scene skips, overrides of the scene that skips it, the overrides that make it do that work,
     #  what the comparison is)
@@ -877,6 +905,8 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         realtime_factor(res)
     if cfg.spinup_duration:
         long_spinup(res)
+    if cfg.averaged_scenes:
+        averaged_models(res)
     if cfg.profile:
         savings(res)
         profile_kernels(res)
@@ -1081,6 +1111,16 @@ def markdown(res: Results) -> str:
                      "errors do not fall by 2^p per halving, read it as a magnitude. Other levels are compared with "
                      "the finest run (of L alone where they averaged the spin phase out: their attitude is not a "
                      "result there)."])
+    if res.averaged:
+        L += _table("## Averaged models: fidelity auto against full (scenes as shipped, whole duration)",
+                    "scene | duration s | averaged by | averaged s | CPU s full | CPU s auto | speed-up | error of L "
+                    "| error of spin | error of θ rad",
+                    [f"{v['scene']} | {v['duration']:g} | {v['models']} | {v['averaged']:.4g} | {v['cpu_full']:.4g} "
+                     f"| {v['cpu_auto']:.4g} | {v['speedup']:.3g} | {v['error_L']:.1e} | {v['error_spin']:.1e} "
+                     f"| {v['error_theta']:.1e}" for v in res.averaged],
+                    ["Errors are final-state differences of auto from full; each contains the full model's fast ripple "
+                     "(O(ε)), which the averaged model does not carry. The regions are in docs/averaged_k.md §7, "
+                     "docs/averaged_m.md and gyro_sim/fidelity.py."])
     if res.savings:
         L += _table("## What skipping is worth (spinup_thin_shell, no controller; CPU s)", "the scene skips | compared "
                     "| horizon s | CPU s (skipped) | stepper, steps | CPU s (done) | stepper, steps | ratio",

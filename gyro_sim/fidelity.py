@@ -237,6 +237,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     w0 = time.perf_counter()
     cmd_times = sorted({c.time for c in scene.commands if c.time < r.T})
     segments = []  # (t0, t1) of averaged stretches
+    models = []  # the averaged model of each stretch: "spin-up", "[M]", "[K]"
     nfev = 0
     next_test, tested_cmd = -math.inf, None
     while not r.done:
@@ -252,15 +253,18 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
                 k, why = averaged_region(r)
                 if k is not None:
                     nfev += _averaged_stretch(r, k, cmd_times, segments)
+                    models.append("spin-up")
                     continue
                 m, why_m = m_region(r)
                 if m is not None:
                     nfev += _m_stretch(r, m, segments)
+                    models.append("[M]")
                     next_test, tested_cmd = sim.t + _recheck(sim), (sim.current.tobytes(), sim.rate.tobytes())
                     continue
                 kk, why_k = k_region(r)
                 if kk is not None:
                     nfev += _k_stretch(r, kk, cmd_times, segments)
+                    models.append("[K]")
                     if law is not None and not r.is_control_tick:  # commands that fit the rebuilt state
                         r.apply_commands(law(r.control_input()))
                     next_test, tested_cmd = sim.t + _recheck(sim), (sim.current.tobytes(), sim.rate.tobytes())
@@ -277,6 +281,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     res = r.result()
     res.wall_time = time.perf_counter() - w0
     res.averaged_segments = segments  # RunResult.euler: ψ, φ NaN there (averaged out)
+    res.averaged_models = models
     res.averaged_rhs_evaluations = nfev
     return res
 

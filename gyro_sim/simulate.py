@@ -67,6 +67,7 @@ class RunResult:
     steps: int = 0
     commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
     averaged_segments: list = field(default_factory=list)  # (t0, t1) s run with the averaged model
+    averaged_models: list = field(default_factory=list)  # the model of each stretch: "spin-up", "[M]", "[K]"
     averaged_rhs_evaluations: int = 0
     effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
     _euler: Optional[np.ndarray] = field(default=None, repr=False)

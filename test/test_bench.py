@@ -124,13 +124,18 @@ def test_bench_smoke(tmp_path):
     cfg = BenchConfig(mode="smoke", scenes=("spinup_thin_shell",), default_horizon=0.01,
                       steps_per_turn=(12, 48, 192), rate_changes=(1e-3, 1e-5, 1e-7), spt_ref=768,
                       rtols=(1e-4, 1e-7), rtol_ref=1e-10,
-                      mode_horizon=0.05, rtf_duration=0.1, profile=False, min_wall=0.0, max_reps=1)
+                      mode_horizon=0.05, rtf_duration=0.1, profile=False, min_wall=0.0, max_reps=1,
+                      averaged_scenes=("three_stators",))
     res = run_bench(cfg, tmp_path, command="smoke")
     _check_outputs(tmp_path, ["spinup_thin_shell"])
     assert res.refs[0]["agreement"] < 1e-8
     # etdrk4 then frozen_flow, 1 and 50 modes each: ETDRK4 takes the same steps whatever the modes
     assert len(res.modes) == 4 and res.modes[0]["steps"] == res.modes[1]["steps"]
     assert res.rtf and res.rtf[0]["rtf"] > 0
+    # [K]'s averaged model runs the three-stator scene throughout, within 1e-3 of the full model
+    (a,) = res.averaged
+    assert a["models"] == "[K]" and a["averaged"] == a["duration"] and a["error_L"] < 1e-3
+    assert "Averaged models" in (tmp_path / "bench.md").read_text()
 
 
 def test_bench_main_refuses_unknown_scene(tmp_path, capsys):
