@@ -142,3 +142,37 @@ def test_twenty_minute_spinup_full_against_auto():
     print(f"\n20-minute spin-up: full {w_full:.1f} s wall, {full.steps} steps; auto {hy.wall_time:.2f} s; "
           f"largest relative difference (spin, θ) {e:.1e}")
     assert e < 1e-3
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(r3=st.floats(0.6, 1.9), spin=st.floats(50.0, 3000.0), theta=st.floats(0.0, math.pi),
+       turn=st.floats(0.0, math.pi), I=st.lists(st.floats(0.0, 0.3), min_size=3, max_size=3),
+       nu=st.lists(st.floats(-3000.0, 3000.0), min_size=3, max_size=3),
+       model=st.sampled_from(["quasi_static", "lag"]), psi=st.booleans())
+def test_random_three_stator_scenes_auto_against_full(r3, spin, theta, turn, I, nu, model, psi):
+    """Random axisymmetric rotors under three random stators (ψ-switching or not), ``fidelity: auto``: finite, and
+    where `auto` averaged (any of its models) within 1e-2 of the full model in L and θ at the end."""
+    d = {"rotor": {"inertia": [5.592e-6, 5.592e-6, 5.592e-6 * r3],
+                   "conductor": {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}},
+         "torque_model": model, "duration": 2.0, "output": {"rate": 50.0},
+         "initial": {"kinetic_moment": 5.592e-6 * r3 * spin, "L_direction": [math.sin(turn), 0.0, math.cos(turn)],
+                     "theta": theta, "phi": 0.3},
+         "stators": [{"name": n, "axis": a, "coil_constant": 1e-2, "current": c, "rate": v}
+                     for n, a, c, v in zip(("z1", "z2", "z3"), ([1, 0, 0], [0, 1, 0], [0, 0, 1]), I, nu)]}
+    if psi:
+        d["controller"] = {"law": "psi_switching", "period": 2e-4, "params": {
+            "control_stators": ["z1", "z2"], "spin_stator": "z3", "nu": [abs(nu[0]) + 3000.0, abs(nu[1]) + 9000.0],
+            "control_current": I[0] * 0.2, "spin_current": I[2], "spin_rate": nu[2]}}
+    s = scene_from_dict(d)
+    full = gyro_sim.run(s)
+    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    assert np.all(np.isfinite(hy.L)) and np.all(np.isfinite(hy.q))
+    eL = float(np.linalg.norm(hy.L[-1] - full.L[-1]) / np.linalg.norm(full.L[-1]))
+    eth = abs(float(hy.theta[-1] - full.theta[-1]))
+    avg = sum(b - a for a, b in hy.averaged_segments)
+    print(f"\n  {model} κ+1 = {r3:.2f} spin {spin:.0f} θ0 {theta:.2f} ψ-switching {psi}: averaged {avg:.2f} s by "
+          f"{sorted(set(hy.averaged_models))}; L {eL:.1e}, θ {eth:.1e}")
+    if avg > 0:
+        assert eL < 1e-2 and eth < 1e-2
+    else:
+        assert eL < 1e-9 and eth < 1e-7  # never averaged: the full model, up to where its steps were cut
