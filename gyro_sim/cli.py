@@ -1,6 +1,6 @@
 """The ``gyro-sim`` command.
 
-    gyro-sim run SCENE [--duration S] [--out DIR] [--record BAG] [--ros [--mode M]]
+    gyro-sim run SCENE [--duration S] [--out DIR] [--record BAG] [--fidelity F] [--ros [--mode M]]
     gyro-sim scenes                 list the built-in scenes
     gyro-sim info BAG               topics, counts, duration, scene of a recorded run
     gyro-sim plot BAG [--out PNG]   spin rate, θ, L and stator currents of a recorded run
@@ -68,6 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with --ros: timing mode of the simulator node (default: lockstep)")
     run.add_argument("--rate-factor", metavar="F", type=float, default=1.0,
                      help="with --ros --mode realtime: simulated seconds per wall second")
+    run.add_argument("--fidelity", choices=("full", "averaged", "auto"), default=None,
+                     help="model fidelity instead of the scene's (in-process only; gyro_sim/fidelity.py)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.set_defaults(func=_cmd_run)
 
@@ -232,8 +234,10 @@ def _cmd_run(args) -> int:
 
     if args.record is not None and args.record.exists():
         return _error(f"--record {args.record}: already exists; give a new directory")
+    if args.ros and args.fidelity not in (None, "full"):
+        return _error(f"--fidelity {args.fidelity}: the ROS simulator node runs the full model; drop --ros or --fidelity")
     try:
-        scene = scene_mod.load_scene(args.scene)
+        scene = scene_mod.load_scene(args.scene, overrides={"fidelity": args.fidelity} if args.fidelity else None)
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem

@@ -103,8 +103,9 @@ def fakes(monkeypatch, tmp_path):
     scene_mod = types.ModuleType("gyro_sim.scene")
     sim_mod = types.ModuleType("gyro_sim.simulate")
 
-    def load_scene(name_or_path):
+    def load_scene(name_or_path, overrides=None):
         calls["load"].append(name_or_path)
+        calls.setdefault("overrides", []).append(overrides)
         key = Path(str(name_or_path)).stem
         if key not in SCENES:
             raise FakeSceneError(f"no scene named {name_or_path!r}")
@@ -320,3 +321,22 @@ def test_real_scene_and_simulate_modules_offer_what_the_cli_uses():
     assert issubclass(scene.SceneError, Exception)
     assert callable(scene.load_scene) and callable(scene.builtin_scenes)
     assert callable(simulate.run)
+
+
+def test_run_with_fidelity_overrides_the_scene(fakes, tmp_path):
+    assert cli.main(["run", "spinup_thin_shell", "--fidelity", "auto", "--out", str(tmp_path)]) == 0
+    assert fakes["overrides"] == [{"fidelity": "auto"}]
+    assert cli.main(["run", "spinup_thin_shell", "--out", str(tmp_path)]) == 0
+    assert fakes["overrides"][-1] is None
+
+
+def test_run_with_averaged_fidelity_refuses_ros(capsys):
+    assert cli.main(["run", "spinup_thin_shell", "--ros", "--fidelity", "auto"]) == 2
+    assert "--fidelity auto: the ROS simulator node runs the full model" in capsys.readouterr().err
+
+
+def test_run_averaged_scene_in_auto_for_real(tmp_path, capsys):
+    """``gyro-sim run three_stators --fidelity auto``: the real scene, averaged throughout ([K])."""
+    assert cli.main(["run", "three_stators", "--fidelity", "auto", "--out", str(tmp_path), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "three_stators" in out and (tmp_path / "three_stators.png").stat().st_size > 0
