@@ -146,6 +146,7 @@ class RunResult:
             "wall_time": self.wall_time,
             "steps": int(self.steps),
             "realtime_factor": t_end / self.wall_time if self.wall_time > 0 else float("inf"),
+            "attitude": self.attitude,
         }
 
 
