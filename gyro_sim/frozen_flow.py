@@ -26,6 +26,10 @@ settle from the previous step's flow, costs no phase), the rest to first order i
 over a step. Nothing here resolves the field frequency or the spin: the step is bounded by how fast
 L changes (docs/numerics.md measures error against step). Valid for an isotropic or axisymmetric
 rotor with electrodynamic torque only (no effects of physics.md §4).
+
+An isotropic rotor without attitude (modes in the case frame, :mod:`gyro_sim.kernels`) takes
+:func:`frozen_flow_step_case`: no R0, no nutation integrals; the moment's forced part is one term per phasor
+at the field's own frequency (the body's turn cancels on the way back to the case frame).
 """
 from __future__ import annotations
 
