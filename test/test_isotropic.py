@@ -198,3 +198,30 @@ def test_no_attitude_work_makes_the_step_cheaper():
     print(f"\nfrozen-flow loop, 2 s: {costs[0] * 1e3:.2f} ms with attitude, {costs[1] * 1e3:.2f} ms without "
           f"({costs[0] / costs[1]:.1f}x)")
     assert costs[0] > 1.5 * costs[1]
+
+
+def test_cli_run_without_attitude_and_recorded(tmp_path, capsys):
+    """`gyro-sim run` on a scene with attitude: false: the summary says θ was not integrated; with --record the
+    run keeps the attitude (the bag's /gyro/imu and /gyro/euler need it) and the bag holds a finite q."""
+    import yaml
+
+    from gyro_sim import cli
+    from gyro_sim.recording import read_bag
+    from gyro_sim.scene import config_dir
+
+    data = yaml.safe_load((config_dir() / "spinup_thin_shell.yaml").read_text())
+    data.update(duration=0.2, controller=None, output={"rate": 50.0, "attitude": False})
+    data["rotor"]["inertia"] = [J, J, J]
+    path = tmp_path / "iso.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert cli.main(["run", str(path), "--out", str(tmp_path), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    with capsys.disabled():
+        print("\n" + out)
+    assert "not integrated (output.attitude: false)" in out and "(|Ω|)" in out
+    bag = tmp_path / "bag"
+    assert cli.main(["run", str(path), "--out", str(tmp_path), "--quiet", "--record", str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert "not integrated" not in out
+    b = read_bag(bag)
+    assert np.isfinite(b.q).all() and np.isfinite(b.euler).all() and len(b.t) == 11
