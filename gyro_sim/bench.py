@@ -724,6 +724,10 @@ SAVINGS = (
     ("output samples tied to the step", {}, {"output.rate": 1000.0},
      "1000 Hz output against 50 Hz: each sample costs a torque evaluation and is a stop, so a step longer "
      "than the sample spacing (frozen_flow's) is cut to it"),
+    ("attitude of an isotropic rotor nobody reads", {"rotor.inertia": [5.592e-6] * 3, "output.attitude": False},
+     {"output.attitude": True},
+     "inertia [J, J, J]: output.attitude false (L and the eddy modes in the case frame, no q) against true "
+     "(the same frozen_flow steps)"),
 )
 
 

@@ -172,14 +172,17 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
     """The summary table of a run, from ``RunResult.summary()``.
 
     Keys used: spin_rate (rad/s), spin_rev_s (rev/s), theta_deg (deg), L_norm
-    (N·m·s), energy (J), t_end (s), wall_time (s), steps, realtime_factor.
+    (N·m·s), energy (J), t_end (s), wall_time (s), steps, realtime_factor, attitude (False: a run
+    without attitude, whose θ is not known and whose spin rate is |Ω|).
     Missing keys are shown as '-'.
     """
     s = summary.get
+    no_att = s("attitude", True) is False
     rows = [
         ("scene", str(name)),
-        ("final spin rate", f"{_num(s('spin_rate'), '.6g')} rad/s  ({_num(s('spin_rev_s'), '.6g')} rev/s)"),
-        ("final θ", f"{_num(s('theta_deg'), '.6g')} deg"),
+        ("final spin rate", f"{_num(s('spin_rate'), '.6g')} rad/s  ({_num(s('spin_rev_s'), '.6g')} rev/s)"
+         + ("  (|Ω|)" if no_att else "")),
+        ("final θ", "not integrated (output.attitude: false)" if no_att else f"{_num(s('theta_deg'), '.6g')} deg"),
         ("|L|", f"{_num(s('L_norm'), '.6g')} N·m·s"),
         ("kinetic energy", f"{_num(s('energy'), '.6g')} J"),
         ("simulated time", f"{_num(s('t_end'), '.6g')} s"),
@@ -245,7 +248,10 @@ def _cmd_run(args) -> int:
         return _run_ros(args, scene, name)
     progress = _Progress(args.duration or scene.duration, not args.quiet and sys.stderr.isatty())
     try:
-        result = simulate.run(scene, duration=args.duration, on_samples=progress)
+        # a bag's /gyro/imu and /gyro/euler need the attitude: a recorded run integrates it whatever the
+        # scene's output.attitude says
+        keep = {"attitude": True} if args.record is not None else {}
+        result = simulate.run(scene, duration=args.duration, on_samples=progress, **keep)
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     finally:

@@ -26,6 +26,10 @@ settle from the previous step's flow, costs no phase), the rest to first order i
 over a step. Nothing here resolves the field frequency or the spin: the step is bounded by how fast
 L changes (docs/numerics.md measures error against step). Valid for an isotropic or axisymmetric
 rotor with electrodynamic torque only (no effects of physics.md §4).
+
+An isotropic rotor without attitude (modes in the case frame, :mod:`gyro_sim.kernels`) takes
+:func:`frozen_flow_step_case`: no R0, no nutation integrals; the moment's forced part is one term per phasor
+at the field's own frequency (the body's turn cancels on the way back to the case frame).
 """
 from __future__ import annotations
 
@@ -38,7 +42,7 @@ from numba import njit
 from .frames import quat_to_matrix
 from .kernels import _equal_steps, _rotl, record_sample
 
-__all__ = ["integrate_frozen", "frozen_flow_step", "steady_modes", "supported"]
+__all__ = ["integrate_frozen", "frozen_flow_step", "frozen_flow_step_case", "steady_modes", "supported"]
 
 
 def supported(J: np.ndarray) -> int:
@@ -313,6 +317,126 @@ def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A
             y[i0 + j] = dec * (y[i0 + j] - S[n, j].real) + E_end[n, j].real
 
 
+@njit(cache=True)
+def _case_pass(Lx, Ly, Lz, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out):
+    """One pass of the case-frame step of an isotropic rotor without attitude, L̄ = (Lx, Ly, Lz) (case,
+    N·m·s), J (kg·m²): out[0:3] = ∫N ds, out[3:6] = ∫(h − s)N ds (N·m·s, N·m·s²), out[10:13] = l̂,
+    out[13] = Ω_p = |L̄|/J (rad/s); S, E_end (nm, 3) receive each mode's particular solution at s = 0 and h
+    (case frame, T, complex: take the real part).
+
+    The body turns by Rot(l̂, Ω_p s); a case phasor's part P_m(l̂) a is seen from the body at
+    f = ν − m Ω_p, so mode n answers it with g_n(f) = −i f/(1/τ_n + i f) and, turned back with the body,
+    at the field's own frequency ν: the particular solution is Re Σ_m g_n(f_m) P_m(l̂) a e^{iνs} and the
+    moment's forced part is one term per phasor, Re Σ_m χ(f_m) P_m(l̂) a e^{iνs}. The modes' mismatch with
+    it, D_n (case), decays while it turns with the body: Σ_m P_m(l̂) D_n e^{(−1/τ_n + imΩ_p)s}."""
+    P = om.shape[0]
+    Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
+    if Ln > 0.0:
+        l0, l1, l2 = Lx / Ln, Ly / Ln, Lz / Ln
+    else:  # no rotation: any axis
+        l0, l1, l2 = 0.0, 0.0, 1.0
+    Op = Ln / J
+    Ep = complex(math.cos(Op * h), math.sin(Op * h))
+    for n in range(nm):
+        for j in range(3):
+            S[n, j] = 0.0
+            E_end[n, j] = 0.0
+    k = 0  # terms X[k] e^{Z[k] s} of the case-frame moment
+    for p in range(P):
+        X[k, 0] = X[k, 1] = X[k, 2] = 0.0
+        for m1 in range(-1, 2):
+            v0, v1, v2 = _proj(m1, l0, l1, l2, A[p, 0], A[p, 1], A[p, 2])
+            f = om[p] - m1 * Op
+            chi = -tail * 1j * f
+            for n in range(nm):
+                g = -1j * f / (lam[n] + 1j * f)
+                chi += w[n] * g
+                S[n, 0] += g * v0
+                S[n, 1] += g * v1
+                S[n, 2] += g * v2
+                ge = g * EO[p]
+                E_end[n, 0] += ge * v0
+                E_end[n, 1] += ge * v1
+                E_end[n, 2] += ge * v2
+            chi *= c_m
+            X[k, 0] += chi * v0
+            X[k, 1] += chi * v1
+            X[k, 2] += chi * v2
+        Z[k] = 1j * om[p]
+        EZ[k] = EO[p]
+        k += 1
+    for n in range(nm):
+        i0 = 7 + 3 * n
+        d0 = c_m * w[n] * (y[i0] - S[n, 0].real)
+        d1 = c_m * w[n] * (y[i0 + 1] - S[n, 1].real)
+        d2 = c_m * w[n] * (y[i0 + 2] - S[n, 2].real)
+        dec = math.exp(-lam[n] * h)
+        for m3 in range(-1, 2):
+            X[k, 0], X[k, 1], X[k, 2] = _proj(m3, l0, l1, l2, d0 + 0j, d1 + 0j, d2 + 0j)
+            Z[k] = -lam[n] + 1j * m3 * Op
+            EZ[k] = dec * _epow(Ep, m3)
+            k += 1
+    # N = m × B, B = ½ Σ_q (a_q e^{iν_q s} + conj): ∫ and ∫(h − s) of each product
+    for j in range(6):
+        out[j] = 0.0
+    for j in range(k):
+        x0, x1, x2 = X[j, 0], X[j, 1], X[j, 2]
+        for q in range(P):
+            a0, a1, a2 = A[q, 0], A[q, 1], A[q, 2]
+            for sg in range(2):
+                if sg == 1:
+                    a0, a1, a2 = a0.conjugate(), a1.conjugate(), a2.conjugate()
+                    zq = Z[j] - 1j * om[q]
+                    ezq = EZ[j] * EO[q].conjugate()
+                else:
+                    zq = Z[j] + 1j * om[q]
+                    ezq = EZ[j] * EO[q]
+                i1, i2 = _integrals(zq, ezq, h)
+                n0 = 0.5 * (x1 * a2 - x2 * a1)
+                n1 = 0.5 * (x2 * a0 - x0 * a2)
+                n2 = 0.5 * (x0 * a1 - x1 * a0)
+                out[0] += (n0 * i1).real
+                out[1] += (n1 * i1).real
+                out[2] += (n2 * i1).real
+                out[3] += (n0 * i2).real
+                out[4] += (n1 * i2).real
+                out[5] += (n2 * i2).real
+    out[10], out[11], out[12] = l0, l1, l2
+    out[13] = Op
+
+
+@njit(cache=True)
+def frozen_flow_step_case(y, s, h, Bre, Bim, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out):
+    """One frozen-flow step of length h (s) from phase time s for an isotropic rotor without attitude (in
+    place on y: L and the case-frame modes; y[3:7] untouched; see :func:`_case_pass`). Two passes as
+    :func:`frozen_flow_step`; the modes end at e_n(h) = e^{−h/τ_n} Rot(l̂, Ω_p h)(e_n(0) − Re S_n) + Re E_end_n."""
+    P = om.shape[0]
+    for p in range(P):
+        EO[p] = complex(math.cos(om[p] * h), math.sin(om[p] * h))
+        e = cmath.exp(1j * om[p] * s)
+        for j in range(3):
+            A[p, j] = (Bre[p, j] - 1j * Bim[p, j]) * e
+    Lx, Ly, Lz = y[0], y[1], y[2]
+    _case_pass(Lx, Ly, Lz, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out)
+    _case_pass(Lx + out[3] / h, Ly + out[4] / h, Lz + out[5] / h, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ,
+               EO, S, E_end, out)
+    y[0] = Lx + out[0]
+    y[1] = Ly + out[1]
+    y[2] = Lz + out[2]
+    l0, l1, l2 = out[10], out[11], out[12]
+    c, sn = math.cos(out[13] * h), math.sin(out[13] * h)
+    for n in range(nm):
+        dec = math.exp(-lam[n] * h)
+        i0 = 7 + 3 * n
+        e0 = y[i0] - S[n, 0].real
+        e1 = y[i0 + 1] - S[n, 1].real
+        e2 = y[i0 + 2] - S[n, 2].real
+        d = (l0 * e0 + l1 * e1 + l2 * e2) * (1.0 - c)  # Rodrigues: Rot(l̂, φ) e
+        y[i0] = dec * (e0 * c + (l1 * e2 - l2 * e1) * sn + l0 * d) + E_end[n, 0].real
+        y[i0 + 1] = dec * (e1 * c + (l2 * e0 - l0 * e2) * sn + l1 * d) + E_end[n, 1].real
+        y[i0 + 2] = dec * (e2 * c + (l0 * e1 - l1 * e0) * sn + l2 * d) + E_end[n, 2].real
+
+
 def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
     """(N, 3) eddy-mode states (body frame, T) in their steady response to the field (phasors referred to
     s = 0) along the free motion of the state ``y``: the particular solution of a frozen-flow pass, with
@@ -331,10 +455,11 @@ def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
 
 @njit(cache=True)
 def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes,
-                     out_y, out_N, k_out, eff):
+                     out_y, out_N, k_out, eff, case=False):
     """Integrate y from t0 through each time in ``t_stops`` with frozen-flow steps no longer than ``h_max``
     (equal steps between stops), recording like :func:`gyro_sim.kernels.integrate`. ``lam_modes`` (N,)
-    = 1/τ_n. Returns (k_out, steps)."""
+    = 1/τ_n; ``case``: isotropic rotor without attitude, modes in the case frame
+    (:func:`frozen_flow_step_case`, J = Jt). Returns (k_out, steps)."""
     P = om.shape[0]
     nm = lam_modes.shape[0]
     A = np.empty((P, 3), np.complex128)
@@ -358,12 +483,16 @@ def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, J
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
             for j in range(k):
-                frozen_flow_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, Ja, ax, lam_modes, w, c_m, tail, nm,
-                                 A, X, Z, EZ, EO, S, E_end, out, R, K1)
+                if case:
+                    frozen_flow_step_case(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, lam_modes, w, c_m, tail, nm,
+                                          A, X, Z, EZ, EO, S, E_end, out)
+                else:
+                    frozen_flow_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, Ja, ax, lam_modes, w, c_m, tail,
+                                     nm, A, X, Z, EZ, EO, S, E_end, out, R, K1)
             steps += k
             t = t_stops[i]
         if record[i]:
             record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N,
-                          k_out)
+                          k_out, case)
             k_out += 1
     return k_out, steps

@@ -7,6 +7,15 @@ State vector ``y`` (all SI):
 * ``y[7+3n : 10+3n]``  e_n, the n-th eddy mode in the body frame (T): the induced moment is
   m_b = c (Σ_n w_n e_n − T_tail dB_b/dt),  c = 2π r2³/μ0 (physics.md §3).
 
+Without attitude (``case``: an isotropic rotor without effects whose attitude no one reads) q is not
+integrated (y[3:7] stays NaN) and the modes are carried in the case frame, e_n ← R e_n: with Ω = L/J
+(case) and Ṙ = [Ω]× R the filter τ ė_n + e_n = −τ dB_b/dt becomes
+
+    τ (ė_n − Ω × e_n) + e_n = −τ (dB/dt − Ω × B),   m = c (Σ_n w_n e_n − T_tail (dB/dt − Ω × B)),
+
+whose linear decay −e_n/τ_n is the body frame's (the same integrating factors); a field step is
+e_n −= ΔB. Nothing in it depends on the attitude (:func:`nonlinear_part_case`).
+
 Each eddy mode is the first-order filter of [M] (2.15) written for its moment:
 τ_n ė_n + e_n = −τ_n dB_b/dt, so that e_n = ĝ_n(ω) B_b with ĝ_n = iωτ_n/(1 − iωτ_n) and the sum
 over n is the modal form of [M] (2.14) (or of the corrected (2.13)). The quasi-static torque
@@ -270,6 +279,62 @@ def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
             damper_derivs(t_abs, y, k0, Jinv, eff, Lbx, Lby, Lbz, Ox, Oy, Oz, Nbx, Nby, Nbz, F)
 
 
+@njit(cache=True, inline="always")
+def nonlinear_part_case(cs, sn, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
+    """Case-frame right-hand side without the linear mode decay, for an isotropic rotor without effects and
+    without attitude (module docstring): y[0:3] = L (case, N·m·s), y[7+3n:10+3n] = e_n (case, T).
+
+    Ω = L/J (rad/s, case; ``Jinv`` all equal), u = dB/dt − Ω × B (T/s, the field's rate seen from the body,
+    in the case frame), m = c (Σ w_n e_n − T_tail u) (A·m²):
+    F[0:3] = N = m × B (N·m), F[3:7] = 0, F[7+3n:10+3n] = Ω × e_n − u  (τ(ė − Ω×e) + e = −τ u).
+    ``cs``, ``sn``: cos, sin(ω_p s) of each phasor; work[12:15] receives Ω.
+    """
+    Bx = By = Bz = 0.0
+    dBx = dBy = dBz = 0.0
+    for p in range(om.shape[0]):
+        c = cs[p]
+        si = sn[p]
+        Bx += Bre[p, 0] * c + Bim[p, 0] * si
+        By += Bre[p, 1] * c + Bim[p, 1] * si
+        Bz += Bre[p, 2] * c + Bim[p, 2] * si
+        dBx += om[p] * (Bim[p, 0] * c - Bre[p, 0] * si)
+        dBy += om[p] * (Bim[p, 1] * c - Bre[p, 1] * si)
+        dBz += om[p] * (Bim[p, 2] * c - Bre[p, 2] * si)
+    Ox = Jinv[0] * y[0]
+    Oy = Jinv[0] * y[1]
+    Oz = Jinv[0] * y[2]
+    work[12] = Ox
+    work[13] = Oy
+    work[14] = Oz
+    for i in range(3, 7):
+        F[i] = 0.0
+    if c_m == 0.0:
+        for i in range(F.shape[0]):
+            F[i] = 0.0
+        return
+    ux = dBx - (Oy * Bz - Oz * By)
+    uy = dBy - (Oz * Bx - Ox * Bz)
+    uz = dBz - (Ox * By - Oy * Bx)
+    mx = -tail * ux
+    my = -tail * uy
+    mz = -tail * uz
+    for n in range(nm):
+        k = 7 + 3 * n
+        ex, ey, ez = y[k], y[k + 1], y[k + 2]
+        mx += w[n] * ex
+        my += w[n] * ey
+        mz += w[n] * ez
+        F[k] = (Oy * ez - Oz * ey) - ux
+        F[k + 1] = (Oz * ex - Ox * ez) - uy
+        F[k + 2] = (Ox * ey - Oy * ex) - uz
+    mx *= c_m
+    my *= c_m
+    mz *= c_m
+    F[0] = my * Bz - mz * By
+    F[1] = mz * Bx - mx * Bz
+    F[2] = mx * By - my * Bx
+
+
 # ----------------------------------------------------------------------------------------
 # exponential RK4
 
@@ -408,6 +473,36 @@ def etd_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2
     _normalize_q(y)
 
 
+@njit(cache=True)
+def etd_case_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, E, E2, Q, A1, A2, A3, buf, work, tab, tw):
+    """One ETDRK4 step (Cox & Matthews 2002) of the case-frame state without attitude (in place on y;
+    :func:`nonlinear_part_case`): L and the modes only, y[3:7] untouched."""
+    n = y.shape[0]
+    Nu = buf[0]
+    Na = buf[1]
+    Nb = buf[2]
+    Nc = buf[3]
+    a = buf[4]
+    b = buf[5]
+    cc = buf[6]
+    phasor_trig(s, om, tw[0], tw[1])
+    nonlinear_part_case(tw[0], tw[1], y, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nu, work)
+    _stage_trig(1, tab, tw)
+    for i in range(n):
+        a[i] = E2[i] * y[i] + Q[i] * Nu[i]
+    nonlinear_part_case(tw[2], tw[3], a, Bre, Bim, om, Jinv, c_m, w, tail, nm, Na, work)
+    for i in range(n):
+        b[i] = E2[i] * y[i] + Q[i] * Na[i]
+    nonlinear_part_case(tw[2], tw[3], b, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nb, work)
+    for i in range(n):
+        cc[i] = E2[i] * a[i] + Q[i] * (2.0 * Nb[i] - Nu[i])
+    _stage_trig(2, tab, tw)
+    nonlinear_part_case(tw[2], tw[3], cc, Bre, Bim, om, Jinv, c_m, w, tail, nm, Nc, work)
+    for i in range(n):
+        if i < 3 or i > 6:
+            y[i] = E[i] * y[i] + A1[i] * Nu[i] + A2[i] * (Na[i] + Nb[i]) + A3[i] * Nc[i]
+
+
 @njit(cache=True, inline="always")
 def _equal_steps(span, h_max):
     """(k, h): the fewest equal steps h = span/k with h ≤ h_max (k ≥ 1)."""
@@ -486,8 +581,34 @@ def _free_case_rotation(y, h, inv_ref, tmp):
 
 
 @njit(cache=True)
+def _free_case_modes(y, h, inv_ref, tau):
+    """Torque-free step without attitude (isotropic rotor, modes in the case frame): L is constant and each
+    mode turns with the body about L by |L| h / J while it decays, e_n ← e^{−h/τ_n} Rot(L̂, |L| h/J) e_n
+    (Rodrigues: e cos φ + (l̂ × e) sin φ + l̂ (l̂·e)(1 − cos φ))."""
+    L0, L1, L2 = y[0], y[1], y[2]
+    Ln = math.sqrt(L0 * L0 + L1 * L1 + L2 * L2)
+    c, sn = 1.0, 0.0
+    l0 = l1 = l2 = 0.0
+    if Ln > 0.0:
+        l0, l1, l2 = L0 / Ln, L1 / Ln, L2 / Ln
+        c, sn = math.cos(h * Ln * inv_ref), math.sin(h * Ln * inv_ref)
+    for n in range(tau.shape[0]):
+        k = 7 + 3 * n
+        f = math.exp(-h / tau[n])
+        e0, e1, e2 = y[k], y[k + 1], y[k + 2]
+        d = (l0 * e0 + l1 * e1 + l2 * e2) * (1.0 - c)
+        y[k] = f * (e0 * c + (l1 * e2 - l2 * e1) * sn + l0 * d)
+        y[k + 1] = f * (e1 * c + (l2 * e0 - l0 * e2) * sn + l1 * d)
+        y[k + 2] = f * (e2 * c + (l0 * e1 - l1 * e0) * sn + l2 * d)
+
+
+@njit(cache=True)
 def free_step(y, h, Jinv, inv_ref, axis, tau):
-    """One geometric step of the torque-free rotor; eddy modes (no field) decay exactly."""
+    """One geometric step of the torque-free rotor; eddy modes (no field) decay exactly. ``axis`` −3: no
+    attitude (:func:`_free_case_modes`)."""
+    if axis == -3:
+        _free_case_modes(y, h, inv_ref, tau)
+        return
     tmp = np.empty(8)
     _free_case_rotation(y, h, inv_ref, tmp)
     if axis >= 0 or axis == -2:
@@ -512,7 +633,8 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
     """Torque-free counterpart of :func:`integrate` (same stops/record/output contract).
 
     ``axis``: body axis index carrying H_r (axisymmetric body: exact steps), −2 for a
-    spherical inertia (H_r = 0), −1 for a triaxial body (4th-order midpoint composition).
+    spherical inertia (H_r = 0), −1 for a triaxial body (4th-order midpoint composition), −3 for a
+    spherical inertia without attitude (modes in the case frame, :func:`_free_case_modes`).
     """
     steps = 0
     t = t0
@@ -632,14 +754,44 @@ def lawson_lie_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c, cols
 
 
 @njit(cache=True)
+def lawson_case_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols, count, E0, W, WB, Eh, Fs, Ys, work,
+                     tab, tw):
+    """One Lawson RK step (weights from :func:`lawson_coefficients`) of the case-frame state without attitude
+    (in place on y; :func:`nonlinear_part_case`): L and the modes only, y[3:7] untouched."""
+    n = y.shape[0]
+    S = c.shape[0]
+    phasor_trig(s, om, tw[0], tw[1])
+    for i in range(S):
+        for k in range(n):
+            Ys[k] = E0[i, k] * y[k]
+        for jj in range(count[i]):
+            j = cols[i, jj]
+            for k in range(n):
+                Ys[k] += W[i, j, k] * Fs[j, k]
+        _stage_trig(i, tab, tw)
+        nonlinear_part_case(tw[2], tw[3], Ys, Bre, Bim, om, Jinv, c_m, w, tail, nm, Fs[i], work)
+    for k in range(n):
+        if k < 3 or k > 6:
+            y[k] *= Eh[k]
+    for j in range(S):
+        if b[j] == 0.0:
+            continue
+        for k in range(n):
+            if k < 3 or k > 6:
+                y[k] += WB[j, k] * Fs[j, k]
+
+
+@njit(cache=True)
 def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
-              out_y, out_N, k_out, eff, A, b, c):
+              out_y, out_N, k_out, eff, A, b, c, case=False):
     """Integrate y from t0 through each time in ``t_stops`` (increasing).
 
     The step is :func:`lawson_lie_step` with the tableau (A, b, c), or :func:`etd_lie_step` (ETDRK4)
-    when the tableau is empty. Each interval between stops is split into equal steps no longer than
-    ``h_max``. Where ``record[i]`` the state and the torque (case, N·m) at ``t_stops[i]`` are
-    written to ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns (k_out, steps).
+    when the tableau is empty; with ``case`` (no attitude: isotropic rotor, no effects, modes in the
+    case frame) :func:`lawson_case_step` or :func:`etd_case_step`. Each interval between stops is split
+    into equal steps no longer than ``h_max``. Where ``record[i]`` the state and the torque (case, N·m)
+    at ``t_stops[i]`` are written to ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns
+    (k_out, steps).
     """
     n = y.shape[0]
     nm = (n - 7 - int(eff[NE])) // 3
@@ -685,7 +837,14 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
                 stage_trig_table(om, c_trig, h, tab)
                 h_last = h
             for j in range(k):
-                if lawson:
+                if case:
+                    if lawson:
+                        lawson_case_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols,
+                                         count, E0, W, WB, Eh, Fs, Ys, work, tab, tw)
+                    else:
+                        etd_case_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
+                                      E, E2, Q, A1, A2, A3, buf, work, tab, tw)
+                elif lawson:
                     lawson_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, A, b, c,
                                     cols, count, E0, W, WB, Eh, Fs, Ys, Ks, work, qn, eff, tab, tw)
                 else:
@@ -695,18 +854,21 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
             t = t_stops[i]
         if record[i]:
             record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, tw[0], tw[1], Fs[0], work, out_y,
-                          out_N, k_out)
+                          out_N, k_out, case)
             k_out += 1
     return k_out, steps
 
 
 @njit(cache=True)
-def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k):
+def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k, case=False):
     """Output sample k: the state y and the torque (case, N·m) at phase time s (scratch: cs, sn (P,), F (n,),
-    work (25,))."""
+    work (25,)); ``case``: the state has no attitude (:func:`nonlinear_part_case`)."""
     out_y[k, :] = y
     phasor_trig(s, om, cs, sn)
-    nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
+    if case:
+        nonlinear_part_case(cs, sn, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work)
+    else:
+        nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)
     out_N[k, 0] = F[0]
     out_N[k, 1] = F[1]
     out_N[k, 2] = F[2]

@@ -3,7 +3,8 @@
 ``plot_run(result, path)`` draws three stacked panels on one time axis:
 
 1. spin rate Ω_b3 (body axis 3) in rev/s, with the magnitude |Ω| dashed;
-2. nutation angle θ in degrees;
+2. nutation angle θ in degrees (a run without attitude, ``result.attitude`` False, has none: the panel
+   says so and the spin panel shows |Ω| alone);
 3. stator current amplitudes in A, one line per stator.
 
 Long runs are thinned to at most ``MAX_POINTS`` points per line by keeping each
@@ -130,13 +131,19 @@ def plot_run(result, path) -> Path:
     fig.suptitle(title)
 
     rev = 1.0 / (2.0 * math.pi)
-    ax_spin.plot(*decimate_minmax(ts, omega[:, 2] * rev), color="C0", label="Ω_b3")
+    attitude = getattr(result, "attitude", True)
+    if attitude:  # without attitude omega_b is in the case frame: its third component is no spin
+        ax_spin.plot(*decimate_minmax(ts, omega[:, 2] * rev), color="C0", label="Ω_b3")
     ax_spin.plot(*decimate_minmax(ts, np.linalg.norm(omega, axis=1) * rev),
                  color="C1", linestyle="--", label="|Ω|")
     ax_spin.set_ylabel("spin rate (rev/s)")
     ax_spin.legend(loc="best")
 
-    ax_theta.plot(*decimate_minmax(ts, theta_deg), color="C2")
+    if attitude:
+        ax_theta.plot(*decimate_minmax(ts, theta_deg), color="C2")
+    else:
+        ax_theta.text(0.5, 0.5, "attitude not integrated (output.attitude: false)", ha="center", va="center",
+                      transform=ax_theta.transAxes)
     ax_theta.set_ylabel("nutation θ (deg)")
 
     for j in range(current.shape[1]):

@@ -343,8 +343,13 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
     and the controller's, ``result.commands``) goes to ``/gyro/stator_commands`` at the time it
     was applied (a field no stator sets is left empty; NaN marks a stator that does not set it). The scene text is the scene file (when
     ``scene.source`` still holds exactly this scene; otherwise, e.g. after overrides, the
-    validated scene dumped to YAML). Returns the bag directory.
+    validated scene dumped to YAML). Returns the bag directory. A run without attitude
+    (``result.attitude`` False) is refused with ValueError: the state topics need it.
     """
+    if not getattr(result, "attitude", True):
+        raise ValueError("record_result: this run did not integrate the attitude (output.attitude: false on an "
+                         "isotropic rotor): /gyro/imu and /gyro/euler need it; run it with "
+                         "gyro_sim.run(scene, attitude=True) to record it")
     scene = result.scene
     text = scene_text(scene)
     names = list(result.stator_names)

@@ -24,7 +24,7 @@ def rerun_bag(path) -> dict:
     if not b.scene_text:
         raise SceneError(f"{path}: the bag holds no scene; it was not written by gyro_sim")
     scene = scene_from_dict(yaml.safe_load(b.scene_text), where=f"{Path(path)} (embedded scene)")
-    runner = Runner(scene, float(b.t[-1]))
+    runner = Runner(scene, float(b.t[-1]), attitude=True)  # bags are recorded with the attitude
     cmds: dict[int, list] = defaultdict(list)
     for i, t in enumerate(b.command_t):
         cmds[stamp_ns(t)].append(i)

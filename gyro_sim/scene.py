@@ -40,6 +40,8 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       rate: 100.0                    # samples per second of simulated time
       windows:                       # optional stretches sampled faster (full model there, see fidelity)
         - {start: 30.0, end: 30.5, rate: 10000.0}   # s, s, samples per second
+      attitude: true                 # false: q, Euler angles not needed (isotropic rotor, no effects:
+                                     # not integrated; NaN in the outputs; see Output)
     integrator:
       method: auto                   # lawson8 | etdrk4 | frozen_flow | auto: frozen_flow where it applies
                                      # and pays, else lawson8 unless an eddy mode is stiff (h > 2τ_n), then
@@ -72,7 +74,7 @@ from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origi
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator, model_validator
 
 from gyro_ctl.config import ControllerConfig
 
@@ -208,7 +210,16 @@ class OutputWindow(_Strict):
 
 
 class Output(_Strict):
+    """What a run reports. ``rate``: samples per simulated second. ``attitude``: false: the run need not
+    report the attitude; for an isotropic rotor (J1 = J2 = J3) without effects, at ``fidelity: full`` and
+    with no controller law that reads the attitude (psi_switching, reorient), the attitude is then not
+    integrated (the eddy modes are carried in the case frame) and q, the Euler angles and θ are NaN
+    (gyro_sim.simulate.Simulator). Where the rotor is not isotropic, an effect is on, the fidelity is
+    averaged/auto or the controller reads the attitude, the dynamics need it: false is accepted and
+    changes nothing. The ROS simulator node and a run that records a bag always integrate it."""
+
     rate: Positive = 100.0
+    attitude: StrictBool = True
     windows: list[OutputWindow] = []
 
     def sample_times(self, T: float) -> np.ndarray:

@@ -3,6 +3,11 @@
 The simulator is the one piece of code every front end drives: :func:`run` (in-process, the
 fastest), the ROS simulator node (lockstep / real-time) and the tests. Units SI, L in the case
 frame, attitude quaternion body → case.
+
+A run without attitude (:func:`integrates_attitude` False: ``output.attitude: false`` on an isotropic
+rotor without effects, full fidelity, no controller law that reads the attitude) integrates L and the eddy
+modes in the case frame only (gyro_sim/kernels.py): q, the Euler angles and θ are NaN, ``omega_b`` holds
+Ω = L/J in the case frame (the body frame is not known; |Ω| is the same) and ``spin_rate`` is |Ω|.
 """
 from __future__ import annotations
 
@@ -19,7 +24,7 @@ from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
 from .scene import Scene, SceneError
 
-__all__ = ["Simulator", "RunResult", "run", "stator_triad"]
+__all__ = ["Simulator", "RunResult", "run", "stator_triad", "integrates_attitude"]
 
 #: steps per turn of the fastest rotation when the scene gives none: both give L to ~1e-7 over the
 #: default scene's 2 s (docs/benchmark.md); lawson8 at about a quarter of etdrk4's cost
@@ -31,8 +36,29 @@ DEFAULT_RATE_CHANGE = 1e-4
 #: 1.9 µs with one phasor and one mode, 17–28 µs with ten modes (measured on the default scene and
 #: spinup_solid_sphere); ``auto`` takes it where its step is that many times longer
 FROZEN_FLOW_COST = 2.0
+#: control laws that read only t, L and the stators (not q, θ or Ω_b): with one of them (or none) a scene may
+#: run without attitude; any other law (psi_switching, reorient: θ and the polar axis) keeps it
+LAWS_WITHOUT_ATTITUDE = frozenset({"spinup", "off", "hold", "manual"})
 #: (A, b, c) of each field stepper for kernels.integrate: DOP853's for lawson8, empty for ETDRK4
 _TABLEAU = {"lawson8": kernels.dop853_tableau(), "etdrk4": (np.empty((0, 0)), np.empty(0), np.empty(0))}
+
+
+def integrates_attitude(scene: Scene, attitude: Optional[bool] = None) -> bool:
+    """Whether a run of ``scene`` integrates the attitude q. ``attitude``: what the caller needs (None: the
+    scene's ``output.attitude``; True: always, as the ROS node and a recorded run do).
+
+    Without attitude only where nothing needs it: the rotor isotropic (J1 = J2 = J3: Ω = L/J does not depend
+    on q, and the spherical conductor's eddy-mode filter is rotation-covariant, so the modes can be carried
+    in the case frame), no effect on (their torques and states need the body frame), ``fidelity: full``
+    (fidelity.py's hand-overs read and rebuild q) and no controller law outside :data:`LAWS_WITHOUT_ATTITUDE`.
+    Elsewhere ``output.attitude: false`` is accepted and changes nothing."""
+    want = scene.output.attitude if attitude is None else bool(attitude)
+    if want:
+        return True
+    J = scene.rotor.inertia
+    ctl = scene.controller
+    return not (J[0] == J[1] == J[2] and not scene.effects.any and scene.fidelity == "full"
+                and (ctl is None or ctl.law in LAWS_WITHOUT_ATTITUDE))
 
 
 def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -49,20 +75,24 @@ def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 @dataclass
 class RunResult:
-    """Time series of a run (rows = output samples). Frames: L, torque case; omega_b body."""
+    """Time series of a run (rows = output samples). Frames: L, torque case; omega_b body.
+
+    A run without attitude (``attitude`` False, :func:`integrates_attitude`) has q, ``euler`` and ``theta``
+    NaN, ``omega_b`` = Ω in the case frame (= L/J; the body frame is unknown, the magnitude is the same),
+    ``spin_rate`` = |Ω| and its eddy modes in the case frame."""
 
     scene: Scene
     t: np.ndarray  # (n,) s
     L: np.ndarray  # (n,3) N·m·s, case frame
-    q: np.ndarray  # (n,4) quaternion (w,x,y,z) body → case
-    omega_b: np.ndarray  # (n,3) rad/s, body frame
+    q: np.ndarray  # (n,4) quaternion (w,x,y,z) body → case (NaN without attitude)
+    omega_b: np.ndarray  # (n,3) rad/s, body frame (case frame without attitude)
     torque: np.ndarray  # (n,3) N·m, case frame (electrodynamic)
     energy: np.ndarray  # (n,) J, rotational kinetic energy
     stator_names: list[str]
     current: np.ndarray  # (n,k) A
     field_rate: np.ndarray  # (n,k) rad/s (signed)
     field_phase: np.ndarray  # (n,k) rad
-    modes: np.ndarray  # (n,3N) eddy-mode states e_n, body frame, T
+    modes: np.ndarray  # (n,3N) eddy-mode states e_n, body frame (case frame without attitude), T
     wall_time: float = 0.0
     steps: int = 0
     commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
@@ -70,13 +100,16 @@ class RunResult:
     averaged_models: list = field(default_factory=list)  # the model of each stretch: "spin-up", "[M]", "[K]"
     averaged_rhs_evaluations: int = 0
     effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
+    attitude: bool = True  # whether q was integrated (integrates_attitude)
     _euler: Optional[np.ndarray] = field(default=None, repr=False)
 
     @property
     def euler(self) -> np.ndarray:
         """(n,3) ψ, θ, φ rad (body in the L-frame): computed from L and q when first read (a run whose
         Euler angles no one reads does no Euler-angle work). Inside averaged stretches ψ and φ are NaN:
-        the averaged model has averaged those fast phases out."""
+        the averaged model has averaged those fast phases out. NaN everywhere in a run without attitude."""
+        if self._euler is None and not self.attitude:
+            self._euler = np.full((self.t.size, 3), np.nan)
         if self._euler is None:
             eul = euler_angles(quat_to_matrix(self.q), self.L)
             for t0, t1 in self.averaged_segments:  # the rows an averaged stretch wrote: t0 < t ≤ t1
@@ -88,7 +121,10 @@ class RunResult:
 
     @property
     def spin_rate(self) -> np.ndarray:
-        """Body angular velocity about the polar axis x3, rad/s."""
+        """Body angular velocity about the polar axis x3, rad/s; without attitude (no body axis to project
+        on) |Ω|, the rate of the isotropic rotor about L."""
+        if not self.attitude:
+            return np.linalg.norm(self.omega_b, axis=1)
         return self.omega_b[:, 2]
 
     @property
@@ -97,7 +133,8 @@ class RunResult:
         return self.euler[:, 1]
 
     def summary(self) -> dict:
-        """Final values and cost of the run (SI units; θ in degrees)."""
+        """Final values and cost of the run (SI units; θ in degrees, NaN without attitude; spin_rate: see
+        :attr:`spin_rate`)."""
         t_end = float(self.t[-1])
         return {
             "scene": self.scene.name,
@@ -110,6 +147,7 @@ class RunResult:
             "wall_time": self.wall_time,
             "steps": int(self.steps),
             "realtime_factor": t_end / self.wall_time if self.wall_time > 0 else float("inf"),
+            "attitude": self.attitude,
         }
 
 
@@ -117,11 +155,13 @@ class Simulator:
     """The full model of a scene, advanced in time under piecewise-constant stator commands.
 
     State: ``t`` (s) and ``y`` (see :mod:`gyro_sim.kernels`). Field phases σ_k are continuous
-    across command changes.
+    across command changes. ``attitude``: see :func:`integrates_attitude`; without it y[3:7] is NaN and the
+    eddy modes are in the case frame (``self.attitude`` False).
     """
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, attitude: Optional[bool] = None):
         self.scene = scene
+        self.attitude = integrates_attitude(scene, attitude)
         J = scene.inertia
         self.J = J
         self.Jinv = 1.0 / J
@@ -174,7 +214,7 @@ class Simulator:
         Lmag = ini.kinetic_moment if ini.kinetic_moment is not None else J[2] * (ini.spin or 0.0)
         self.y = np.zeros(7 + 3 * tau.size + self.n_extra)
         self.y[0:3] = Lmag * d
-        self.y[3:7] = attitude_from_euler(d, ini.psi, ini.theta, ini.phi)
+        self.y[3:7] = attitude_from_euler(d, ini.psi, ini.theta, ini.phi) if self.attitude else math.nan
         if scene.effects.damper is not None:
             k0 = 7 + 3 * tau.size
             self.y[k0:k0 + 3] = scene.effects.damper.offset
@@ -195,6 +235,8 @@ class Simulator:
             self._free_axis, ref = 1, J[0]
         else:
             self._free_axis, ref = -1, J[0]
+        if not self.attitude:
+            self._free_axis = -3  # isotropic, modes in the case frame (kernels.free_step)
         self._inv_ref = 1.0 / ref
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
 
@@ -225,10 +267,11 @@ class Simulator:
         return Bre.sum(axis=0)
 
     def _field_step(self, before: np.ndarray, after: np.ndarray) -> None:
-        """Instant response of the eddy modes to a field step: e_n −= Rᵀ ΔB (τ_n ė_n + e_n = −τ_n dB_b/dt)."""
+        """Instant response of the eddy modes to a field step: e_n −= Rᵀ ΔB (τ_n ė_n + e_n = −τ_n dB_b/dt);
+        without attitude (modes in the case frame) e_n −= ΔB."""
         if self.tau.size == 0:
             return
-        dBb = quat_to_matrix(self.y[3:7]).T @ (after - before)
+        dBb = quat_to_matrix(self.y[3:7]).T @ (after - before) if self.attitude else after - before
         self.y[7:7 + 3 * self.tau.size] -= np.tile(dBb, self.tau.size)
 
     def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -357,7 +400,8 @@ class Simulator:
             ax = frozen_flow.supported(self.J)
             k_out, steps = frozen_flow.integrate_frozen(
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
-                self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff)
+                self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
+                not self.attitude)
         elif free:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
@@ -365,7 +409,7 @@ class Simulator:
         else:
             k_out, steps = kernels.integrate(
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method])
+                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method], not self.attitude)
         self.steps += steps
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
@@ -398,6 +442,10 @@ class Simulator:
         """Electrodynamic torque now (case frame, N·m)."""
         Bre, Bim, om = self.phasors()
         F = np.zeros(self.y.size)
+        if not self.attitude:  # the phasors are referred to now: cos, sin(ω_p · 0)
+            kernels.nonlinear_part_case(np.ones(om.size), np.zeros(om.size), self.y, Bre, Bim, om, self.Jinv,
+                                        self.c_m, self.w, self.tail, self.tau.size, F, np.zeros(25))
+            return F[0:3].copy()
         self.eff[effects.T0] = self.t
         kernels.nonlinear_part(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail,
                                self.tau.size, F, np.zeros(25), self.eff)
@@ -425,8 +473,11 @@ class Simulator:
         return out
 
     def body_rates(self, t: np.ndarray, Y: np.ndarray) -> np.ndarray:
-        """Ω_b (rad/s, body frame) of states ``Y`` (rows) at times ``t`` (s), effects included."""
+        """Ω_b (rad/s, body frame) of states ``Y`` (rows) at times ``t`` (s), effects included; without attitude
+        Ω = L/J in the case frame."""
         Y = np.atleast_2d(Y)
+        if not self.attitude:
+            return Y[:, 0:3] * self.Jinv
         if self.eff[effects.ON] == 0.0:
             return body_rates(self.J, Y[:, 0:3], Y[:, 3:7])[1]
         Lb, _ = body_rates(self.J, Y[:, 0:3], Y[:, 3:7])
@@ -459,15 +510,17 @@ class Runner:
     break the scene's due commands are applied; at a controller tick the caller supplies the
     commands (in-process: the law; ROS node: the command message). The sample recorded at time t
     shows the state at t and the field that acted up to t. Used by :func:`run` and by the
-    simulator node, so both produce the same numbers.
+    simulator node, so both produce the same numbers. ``attitude``: see :func:`integrates_attitude` (the
+    ROS node passes True: it publishes /gyro/imu and /gyro/euler).
     """
 
-    def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True):
+    def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
+                 attitude: Optional[bool] = None):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
         self.scene, self.T = scene, T
-        self.sim = Simulator(scene)
+        self.sim = Simulator(scene, attitude)
         t_out = scene.output.sample_times(T)
         ctl = scene.controller
         self.period = (ctl.period or 1.0 / scene.output.rate) if ctl is not None else None
@@ -534,7 +587,10 @@ class Runner:
 
         sim = self.sim
         L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
-        omega_b = sim.body_rates(sim.t, sim.y)[0] if sim.eff[effects.ON] else body_rates(sim.J, L, q)[1]
+        if sim.eff[effects.ON] or not sim.attitude:
+            omega_b = sim.body_rates(sim.t, sim.y)[0]
+        else:
+            omega_b = body_rates(sim.J, L, q)[1]
         if not hasattr(self, "_axes"):
             self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
         return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
@@ -627,10 +683,13 @@ class Runner:
 
     def samples(self, rows: slice, euler: bool = True) -> dict:
         """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current,
-        rate, phase."""
+        rate, phase (without attitude: q and euler NaN, omega_b in the case frame)."""
         L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
         extra = {}
-        if self.sim.eff[effects.ON]:
+        if not self.sim.attitude:
+            omega_b = self.sim.body_rates(self.t_out[rows], self.out_y[rows])
+            energy = kinetic_energy(self.sim.J, omega_b)  # isotropic: frame-free
+        elif self.sim.eff[effects.ON]:
             t = self.t_out[rows]
             omega_b = self.sim.body_rates(t, self.out_y[rows])
             energy = kinetic_energy(self.sim.J, omega_b)  # the rigid body's own
@@ -638,7 +697,9 @@ class Runner:
         else:
             _, omega_b = body_rates(self.sim.J, L, q)
             energy = kinetic_energy(self.sim.J, omega_b)
-        eul = euler_angles(quat_to_matrix(q), L) if euler else None
+        eul = None
+        if euler:
+            eul = euler_angles(quat_to_matrix(q), L) if self.sim.attitude else np.full((L.shape[0], 3), np.nan)
         return {"t": self.t_out[rows], "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
                 "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
                 "effects": extra}
@@ -649,15 +710,17 @@ class Runner:
                          torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
                          current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
                          modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
-                         steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"])
+                         steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
+                         attitude=self.sim.attitude)
 
 
-def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunResult:
+def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None) -> RunResult:
     """Run a scene in-process (no ROS) and return its time series at the scene's output rate.
 
     A scene with a ``controller`` runs its law (gyro_ctl) at every tick, and with ``sampling: events``
     also at the exact zeros of the law's switching functions between ticks. ``on_samples(dict)``, if
-    given, is called with each new chunk of output rows (see :meth:`Runner.samples`).
+    given, is called with each new chunk of output rows (see :meth:`Runner.samples`). ``attitude``: None
+    = the scene's ``output.attitude``, True = integrate it anyway (:func:`integrates_attitude`).
     """
     from gyro_ctl.laws import make_law, make_switching
 
@@ -670,7 +733,7 @@ def run(scene: Scene, duration: Optional[float] = None, on_samples=None) -> RunR
     switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
     # samples are breaks where a caller acts on them, and where switching events are looked for between
     # breaks (the node does the same: the same events, the same bits)
-    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching is not None)
+    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching is not None, attitude=attitude)
     w0 = time.perf_counter()
     while not r.done:
         if r.row > 0 and law is not None and r.is_control_tick:

@@ -290,8 +290,8 @@ def _q_current(res, name):
 #: time-series quantities of a run (SI; *_deg in degrees), by name
 QUANTITIES: dict[str, Callable] = {
     "t": lambda r: r.t,
-    "spin": lambda r: r.omega_b[:, 2],  # rad/s, body axis 3
-    "spin_rev_s": lambda r: r.omega_b[:, 2] / (2 * math.pi),
+    "spin": lambda r: r.spin_rate,  # rad/s, body axis 3 (|Ω| in a run without attitude: RunResult.spin_rate)
+    "spin_rev_s": lambda r: r.spin_rate / (2 * math.pi),
     "omega_norm": lambda r: np.linalg.norm(r.omega_b, axis=1),
     "theta": lambda r: r.euler[:, 1],
     "theta_deg": lambda r: np.degrees(r.euler[:, 1]),
@@ -764,7 +764,8 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
         try:
             res = _run_scene(scene) if any(m.needs_run for m in metrics) or series else None
             if res is not None:
-                finite = np.isfinite(res.L).all(axis=1) & np.isfinite(res.q).all(axis=1)
+                # (q is NaN by design in a run without attitude: output.attitude false, isotropic rotor)
+                finite = np.isfinite(res.L).all(axis=1) & (np.isfinite(res.q).all(axis=1) | (not res.attitude))
                 if not finite.all():
                     i = int(np.argmin(finite))
                     raise FloatingPointError(f"non-finite state (L or attitude) at t = {res.t[i]:.6g} s")

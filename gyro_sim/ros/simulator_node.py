@@ -137,7 +137,9 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     """The simulation loop (main thread); DDS callbacks run in an executor thread."""
     p = node._params()
     scene = node.scene
-    runner = Runner(scene, p["duration"] or None)
+    # the node publishes /gyro/imu (orientation) and /gyro/euler: it always integrates the attitude, whatever
+    # the scene's output.attitude says (simulate.integrates_attitude)
+    runner = Runner(scene, p["duration"] or None, attitude=True)
     names = list(runner.sim.stator_names)
     expect_commands = scene.controller is not None
     recorder = None
