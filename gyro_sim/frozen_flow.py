@@ -83,6 +83,33 @@ def _integrals(z, ez, h):
     return i1, (i1 - h) * r  # (e^{zh} − 1 − zh)/z²
 
 
+
+@njit(cache=True, inline="always")
+def _field_half(A, q, sg, z, ez, om_q, eo_q):
+    """Half sg of phasor q of B = ½ Σ_q (a_q e^{iν_q s} + conj) (T) times a moment term e^{z s}: (a or ā, the
+    product's exponent z ± iν_q, its factor at s = h)."""
+    a0, a1, a2 = A[q, 0], A[q, 1], A[q, 2]
+    if sg == 1:
+        return a0.conjugate(), a1.conjugate(), a2.conjugate(), z - 1j * om_q, ez * eo_q.conjugate()
+    return a0, a1, a2, z + 1j * om_q, ez * eo_q
+
+
+@njit(cache=True, inline="always")
+def _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out):
+    """One product term of N = m × B, ½ x × a e^{zq s} (N·m): adds its ∫0^h to out[0:3] and its ∫0^h (h − s)
+    to out[3:6]; returns ½ x × a."""
+    i1, i2 = _integrals(zq, ezq, h)
+    n0 = 0.5 * (x1 * a2 - x2 * a1)
+    n1 = 0.5 * (x2 * a0 - x0 * a2)
+    n2 = 0.5 * (x0 * a1 - x1 * a0)
+    out[0] += (n0 * i1).real
+    out[1] += (n1 * i1).real
+    out[2] += (n2 * i1).real
+    out[3] += (n0 * i2).real
+    out[4] += (n1 * i2).real
+    out[5] += (n2 * i2).real
+    return n0, n1, n2
+
 @njit(cache=True, inline="always")
 def _epow(E, k):
     """E^k for |E| = 1 and k in −2 … 2."""
@@ -191,25 +218,9 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     for j in range(k):
         x0, x1, x2 = X[j, 0], X[j, 1], X[j, 2]
         for q in range(P):
-            a0, a1, a2 = A[q, 0], A[q, 1], A[q, 2]
             for sg in range(2):
-                if sg == 1:
-                    a0, a1, a2 = a0.conjugate(), a1.conjugate(), a2.conjugate()
-                    zq = Z[j] - 1j * om[q]
-                    ezq = EZ[j] * EO[q].conjugate()
-                else:
-                    zq = Z[j] + 1j * om[q]
-                    ezq = EZ[j] * EO[q]
-                i1, i2 = _integrals(zq, ezq, h)
-                n0 = 0.5 * (x1 * a2 - x2 * a1)
-                n1 = 0.5 * (x2 * a0 - x0 * a2)
-                n2 = 0.5 * (x0 * a1 - x1 * a0)
-                out[0] += (n0 * i1).real
-                out[1] += (n1 * i1).real
-                out[2] += (n2 * i1).real
-                out[3] += (n0 * i2).real
-                out[4] += (n1 * i2).real
-                out[5] += (n2 * i2).real
+                a0, a1, a2, zq, ezq = _field_half(A, q, sg, Z[j], EZ[j], om[q], EO[q])
+                n0, n1, n2 = _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out)
                 # N = ½ Σ (n e^{zs} + conj): each half times e^{−iΩ_p s}
                 k1, m1 = _integrals(zq - 1j * Op, ezq * Ep.conjugate(), h)
                 k2, m2 = _integrals(zq.conjugate() - 1j * Op, (ezq * Ep).conjugate(), h)
@@ -382,25 +393,9 @@ def _case_pass(Lx, Ly, Lz, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, 
     for j in range(k):
         x0, x1, x2 = X[j, 0], X[j, 1], X[j, 2]
         for q in range(P):
-            a0, a1, a2 = A[q, 0], A[q, 1], A[q, 2]
             for sg in range(2):
-                if sg == 1:
-                    a0, a1, a2 = a0.conjugate(), a1.conjugate(), a2.conjugate()
-                    zq = Z[j] - 1j * om[q]
-                    ezq = EZ[j] * EO[q].conjugate()
-                else:
-                    zq = Z[j] + 1j * om[q]
-                    ezq = EZ[j] * EO[q]
-                i1, i2 = _integrals(zq, ezq, h)
-                n0 = 0.5 * (x1 * a2 - x2 * a1)
-                n1 = 0.5 * (x2 * a0 - x0 * a2)
-                n2 = 0.5 * (x0 * a1 - x1 * a0)
-                out[0] += (n0 * i1).real
-                out[1] += (n1 * i1).real
-                out[2] += (n2 * i1).real
-                out[3] += (n0 * i2).real
-                out[4] += (n1 * i2).real
-                out[5] += (n2 * i2).real
+                a0, a1, a2, zq, ezq = _field_half(A, q, sg, Z[j], EZ[j], om[q], EO[q])
+                n0, n1, n2 = _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out)
     out[10], out[11], out[12] = l0, l1, l2
     out[13] = Op
 
