@@ -225,14 +225,19 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
 
     The regions are tested where the commands change and otherwise every ``RECHECK`` of the slow time
     |L|/|N| (they move with the slow variables); between tests the full model runs its output samples
-    inside one compiled call. After an [M] or [K] stretch that ended at its region's edge the full model
-    runs that long before the next test.
+    inside one compiled call (or, with ``sampling: events``, switches the law at its exact instants). After
+    a stretch that ended at its region's edge the full model runs that long before the next test; after
+    one that ended at a command or an output window the next test is at once. A controller must be
+    settled (its next command the one in force) before a stretch starts.
     """
-    from gyro_ctl.laws import make_law
+    from gyro_ctl.laws import make_law, make_switching
 
     r = Runner(scene, duration, sample_breaks=False)
     sim = r.sim
-    law = make_law(scene.controller) if scene.controller is not None else None
+    ctl = scene.controller
+    law = make_law(ctl) if ctl is not None else None
+    switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    switched = set(ctl.params.control_stators) if ctl is not None and ctl.law == "psi_switching" else set()
     strict = scene.fidelity == "averaged"
     w0 = time.perf_counter()
     cmd_times = sorted({c.time for c in scene.commands if c.time < r.T})
@@ -250,31 +255,23 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
         elif r.row > 0:
             cmd = (sim.current.tobytes(), sim.rate.tobytes())
             if sim.t >= next_test or cmd != tested_cmd:
-                k, why = averaged_region(r)
-                if k is not None:
-                    nfev += _averaged_stretch(r, k, cmd_times, segments)
-                    models.append("spin-up")
-                    continue
-                m, why_m = m_region(r)
-                if m is not None:
-                    nfev += _m_stretch(r, m, segments)
-                    models.append("[M]")
-                    next_test, tested_cmd = sim.t + _recheck(sim), (sim.current.tobytes(), sim.rate.tobytes())
-                    continue
-                kk, why_k = k_region(r)
-                if kk is not None:
-                    nfev += _k_stretch(r, kk, cmd_times, segments)
-                    models.append("[K]")
-                    if law is not None and not r.is_control_tick:  # commands that fit the rebuilt state
+                n, model, edge, why = _averaged_stretch_if_any(r, law, switched, cmd_times, segments)
+                if model is not None:
+                    nfev += n
+                    models.append(model)
+                    if edge and switched:  # the rebuilt attitude needs its switching signs at once
                         r.apply_commands(law(r.control_input()))
-                    next_test, tested_cmd = sim.t + _recheck(sim), (sim.current.tobytes(), sim.rate.tobytes())
+                    next_test = sim.t + _recheck(sim) if edge else -math.inf
+                    tested_cmd = (sim.current.tobytes(), sim.rate.tobytes())
                     continue
                 if strict and not segments:
                     raise SceneError(f"fidelity = 'averaged': the averaged model does not hold at t = {sim.t:g} s: "
-                                     f"{why}; [M]'s averaged model: {why_m}; [K]'s averaged model: {why_k}; "
-                                     "use fidelity: auto or full")
+                                     f"{why}; use fidelity: auto or full")
                 next_test, tested_cmd = sim.t + _recheck(sim), cmd
             until = min(next_test, scene.output.next_window_start(sim.t))
+        if switching is not None and r.row > 0:
+            r.advance_located(law, switching)  # to the next break (ticks, commands): the law's exact switches
+            continue
         if until is not None and until <= sim.t + 1e-12 * max(1.0, sim.t):  # never an advance of zero
             until = float(r.t_out[r.row]) if r.row < r.t_out.size else None
         r.advance(until=until)
@@ -284,6 +281,45 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     res.averaged_models = models
     res.averaged_rhs_evaluations = nfev
     return res
+
+
+def _averaged_stretch_if_any(r: Runner, law, switched: set, cmd_times: list, segments: list):
+    """Run the first averaged model whose region holds now (the spin-up model, [M]'s, [K]'s) over its stretch.
+
+    Returns (RHS evaluations, the model's name or None, whether the stretch ended at its region's edge, why
+    none applies: every model's reason)."""
+    settled, why_law = law_settled(r, law, switched)
+    if not settled:
+        return 0, None, False, why_law
+    k, why = averaged_region(r)
+    if k is not None:
+        return _averaged_stretch(r, k, cmd_times, segments), "spin-up", False, ""
+    m, why_m = m_region(r)
+    if m is not None:
+        n, edge = _m_stretch(r, m, segments)
+        return n, "[M]", edge, ""
+    kk, why_k = k_region(r)
+    if kk is not None:
+        n, edge = _k_stretch(r, kk, cmd_times, segments)
+        return n, "[K]", edge, ""
+    return 0, None, False, f"{why}; [M]'s averaged model: {why_m}; [K]'s averaged model: {why_k}"
+
+
+def law_settled(r: Runner, law, switched: set = frozenset()) -> tuple[bool, str]:
+    """(True, '') if the controller's next command is the one in force (so an averaged stretch may hold it),
+    else (False, which stator it would change). ``switched``: stators whose field direction the law flips
+    (ψ-switching, averaged by [K]'s model): compared in current and |rate|."""
+    if law is None:
+        return True, ""
+    sim = r.sim
+    for name, (cur, rate) in law(r.control_input()).items():
+        k = sim.stator_names.index(name)
+        if cur is not None and cur != sim.current[k]:
+            return False, (f"the controller's next command sets {name}'s current to {cur:g} A "
+                           f"(in force: {sim.current[k]:g} A)")
+        if rate is not None and (abs(rate) != abs(sim.rate[k]) if name in switched else rate != sim.rate[k]):
+            return False, f"the controller's next command sets {name}'s rate to {rate:g} rad/s (in force: {sim.rate[k]:g})"
+    return True, ""
 
 
 def _recheck(sim) -> float:
@@ -371,10 +407,10 @@ def _m_outputs(L, rho, sigma, theta) -> tuple[np.ndarray, np.ndarray]:
     return Lc, np.where(q[:, :1] < 0, -q, q)  # w ≥ 0, as frames.matrix_to_quat gives
 
 
-def _m_stretch(r: Runner, model: AveragedM, segments: list) -> int:
-    """Jump the runner over a stretch of [M]'s averaged model: to the end of the run, or to the instant its
-    solution leaves the region (located by events between samples; there back to the full model).
-    Returns RHS evaluations."""
+def _m_stretch(r: Runner, model: AveragedM, segments: list) -> tuple[int, bool]:
+    """Jump the runner over a stretch of [M]'s averaged model: to the end of the run (or the next output
+    window), or to the instant its solution leaves the region (located by events between samples; there back
+    to the full model). Returns (RHS evaluations, whether it ended at the region's edge)."""
     sim = r.sim
     t0 = sim.t
     t_end = min(r.T, r.scene.output.next_window_start(t0))
@@ -401,7 +437,7 @@ def _m_stretch(r: Runner, model: AveragedM, segments: list) -> int:
     _jump(r, n, t0, t1)
     segments.append((t0, t1))
     _m_handover_to_full(sim, y1)
-    return int(sol.nfev)
+    return int(sol.nfev), bool(exits)
 
 
 def _m_handover_to_full(sim, y_slow: np.ndarray) -> None:
@@ -442,10 +478,11 @@ def k_region(runner: Runner) -> tuple[Optional[SlowK], str]:
     return (model, "") if ok else (None, why)
 
 
-def _k_stretch(r: Runner, model: SlowK, cmd_times: list, segments: list) -> int:
+def _k_stretch(r: Runner, model: SlowK, cmd_times: list, segments: list) -> tuple[int, bool]:
     """Jump the runner over a stretch of [K]'s averaged model: to the next command, output window or the end,
     or to the instant its solution leaves the region (a solve_ivp event); there back to the full model
-    (L, θ kept, ψ = φ = 0, eddy modes at their steady response). Returns RHS evaluations."""
+    (L, θ kept, ψ = φ = 0, eddy modes at their steady response). Returns (RHS evaluations, whether it ended
+    at the region's edge)."""
     sim = r.sim
     t0 = sim.t
     t_end = min(next((t for t in cmd_times if t > t0 + 1e-12), r.T), r.scene.output.next_window_start(t0))
@@ -468,7 +505,7 @@ def _k_stretch(r: Runner, model: SlowK, cmd_times: list, segments: list) -> int:
     sim.y[0:3], sim.y[3:7] = x1[0:3], _k_attitude(x1[None, 0:3], x1[3:4])[0]
     _steady_modes(sim)
     r.apply_scene_commands()
-    return int(sol.nfev)
+    return int(sol.nfev), bool(sol.t_events[0].size)
 
 
 def _k_attitude(L: np.ndarray, theta: np.ndarray) -> np.ndarray:

@@ -191,6 +191,17 @@ class Initial(_Strict):
         return self
 
 
+def merge_times(times: np.ndarray, exact: np.ndarray) -> np.ndarray:
+    """The sorted union of two sets of instants (s), where a time of ``times`` within round-off (1e-9
+    relative) of one of ``exact`` is that one: no near-duplicate output rows."""
+    if not exact.size:
+        return np.unique(times)
+    j = np.searchsorted(exact, times)
+    lo, hi = np.clip(j - 1, 0, exact.size - 1), np.clip(j, 0, exact.size - 1)
+    near = np.minimum(np.abs(exact[lo] - times), np.abs(exact[hi] - times)) <= 1e-9 * np.maximum(1.0, np.abs(times))
+    return np.union1d(exact, times[~near])
+
+
 class OutputWindow(_Strict):
     """A stretch [start, end] (s) sampled at ``rate`` (samples per simulated second) on top of the scene's
     rate. ``fidelity: auto`` runs the full model inside it (the detail was asked for)."""
@@ -203,10 +214,11 @@ class OutputWindow(_Strict):
     def _ordered(self) -> "OutputWindow":
         if not self.end > self.start:
             raise ValueError(f"end = {self.end}: must be greater than start = {self.start}")
-        if (self.end - self.start) * self.rate > MAX_WINDOW_SAMPLES:
-            raise ValueError(f"rate = {self.rate}: {(self.end - self.start) * self.rate:.3g} samples in "
-                             f"[{self.start}, {self.end}] s; at most {MAX_WINDOW_SAMPLES:.0e} a window")
         return self
+
+    def samples_within(self, T: float) -> float:
+        """How many samples the window asks for within a run of T s."""
+        return max(0.0, min(self.end, T) - self.start) * self.rate
 
 
 class Output(_Strict):
@@ -222,8 +234,20 @@ class Output(_Strict):
     attitude: StrictBool = True
     windows: list[OutputWindow] = []
 
+    def check_windows(self, T: float) -> None:
+        """ValueError naming the window if one asks for more than ``MAX_WINDOW_SAMPLES`` within a run of T s."""
+        for i, w in enumerate(self.windows):
+            n = w.samples_within(T)
+            if n > MAX_WINDOW_SAMPLES:
+                raise ValueError(f"output.windows.{i}: rate = {w.rate}: {n:.3g} samples in [{w.start}, "
+                                 f"{min(w.end, T)}] s; at most {MAX_WINDOW_SAMPLES:.0e} a window")
+
     def sample_times(self, T: float) -> np.ndarray:
         """All output instants in [0, T] (s, sorted, unique): every 1/rate, T itself, and the windows' samples."""
+        try:
+            self.check_windows(T)
+        except ValueError as exc:
+            raise SceneError(f"duration = {T:g} s: {exc}") from None
         dt = 1.0 / self.rate
         t = np.arange(int(math.floor(T / dt + 1e-9)) + 1) * dt
         if t[-1] < T * (1 - 1e-12):
@@ -232,11 +256,7 @@ class Output(_Strict):
             if w.start < T:
                 end = min(w.end, T)
                 n = int(math.floor((end - w.start) * w.rate + 1e-9))
-                tw = w.start + np.arange(n + 1) / w.rate
-                # a window sample within round-off of a regular one is that one (no near-duplicate rows)
-                i = np.clip(np.searchsorted(t, tw), 1, t.size - 1)
-                near = np.minimum(np.abs(t[i] - tw), np.abs(t[i - 1] - tw)) <= 1e-9 * np.maximum(1.0, tw)
-                t = np.union1d(t, tw[~near])
+                t = merge_times(w.start + np.arange(n + 1) / w.rate, t)
         return t
 
     def window_at(self, t: float) -> Optional["OutputWindow"]:
@@ -307,6 +327,7 @@ class Scene(_Strict):
                     f"integrator.method = 'frozen_flow' takes the electrodynamic torque only; effects {on} are on: "
                     f"use lawson8, etdrk4 or auto"
                 )
+        self.output.check_windows(self.duration)
         if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:
             raise ValueError(
                 f"torque_model = {self.torque_model!r} needs rotor.conductor; add one or set torque_model: none"

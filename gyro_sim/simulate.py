@@ -22,7 +22,7 @@ from . import effects, frozen_flow, kernels
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
-from .scene import Scene, SceneError
+from .scene import Scene, SceneError, merge_times
 
 __all__ = ["Simulator", "RunResult", "run", "stator_triad", "integrates_attitude"]
 
@@ -527,7 +527,7 @@ class Runner:
         ticks = np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if ctl is not None else np.zeros(0)
         self._ticks = set(ticks.tolist())
         # every controller tick is an output sample too: the controller (node) sees the published state
-        self.t_out = t_out = np.union1d(t_out, ticks)
+        self.t_out = t_out = merge_times(t_out, ticks)  # a tick is exact: a sample within round-off is it
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
         fly = scene.effects.flywheel  # the kinks of its speed profile are breaks: steps never straddle one
         knots = {t for t in fly.profile.time if 0 < t < T} if fly is not None else set()

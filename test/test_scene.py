@@ -139,8 +139,12 @@ def test_overrides_apply_before_validation():
 def test_output_window_refused_when_empty_or_huge():
     refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 2.0, "end": 1.0, "rate": 1000.0}]}),
            "output.windows.0", "end = 1.0", "greater than start = 2.0")
-    refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 0.0, "end": 100.0, "rate": 1e6}]}),
-           "output.windows.0", "rate = 1000000.0", "at most")
+    refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 0.0, "end": 50.0, "rate": 1e6}]}),
+           "output.windows.0", "rate = 1000000.0", "5e+07 samples in [0.0, 50.0] s", "at most")
+    # counted within the run: the same window in a 1 s run is fine
+    d = mutate("output", {"rate": 50.0, "windows": [{"start": 0.0, "end": 100.0, "rate": 1e6}]})
+    d["duration"] = 1.0
+    assert scene_from_dict(d).output.sample_times(1.0).size == 1_000_001
     refuse(mutate("output", {"rate": 50.0, "windows": [{"start": 0.0, "end": 1.0}]}), "output.windows.0.rate", "missing")
 
 

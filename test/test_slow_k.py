@@ -125,3 +125,46 @@ def test_reorient_law_is_not_averaged():
     s = gyro_sim.load_scene("reorient_L", overrides={"fidelity": "averaged", "duration": 0.1})
     with pytest.raises(gyro_sim.SceneError, match=r"\[K\]'s averaged model: controller law 'reorient'"):
         gyro_sim.run(s)
+
+
+def _three_stators(**over):
+    return gyro_sim.load_scene("three_stators", overrides=over)
+
+
+def test_a_constant_law_overrides_a_scheduled_command_in_auto_as_in_full():
+    """A `manual` law (period 1 s) re-sends z3 at 200 rad/s at its ticks; a scheduled command sets 300 rad/s at
+    0.5 s. The full model runs 300 rad/s until the tick at 1 s; `auto` holds no averaged stretch across that
+    tick (the law is not settled: its next command differs) and re-applies nothing between ticks."""
+    from gyro_sim.scene import Command
+
+    s = _three_stators(duration=6.0, controller={"law": "manual", "period": 1.0, "params": {"commands": {
+        "z1": {"current": 0.19445, "rate": 420.0}, "z2": {"current": 0.19445, "rate": -1040.0},
+        "z3": {"current": 0.28284, "rate": 200.0}}}})
+    s = s.model_copy(update={"commands": [Command(time=0.5, stator="z3", rate=300.0)]})
+    full, hy = gyro_sim.run(s), gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    assert np.array_equal(full.field_rate, hy.field_rate)  # 300 rad/s on (0.5, 1], 200 after, in both
+    assert not any(0.5 < c[0] < 1.0 for c in hy.commands)  # nothing re-applied between the ticks
+    eL = float(np.max(np.linalg.norm(full.L - hy.L, axis=1)) / np.linalg.norm(full.L[0]))
+    print(f"\n  averaged {[(round(a, 3), round(b, 3)) for a, b in hy.averaged_segments]}; max |ΔL|/|L| {eL:.1e} "
+          "(tolerance 3e-4)")
+    assert not any(a < 1.0 < b for a, b in hy.averaged_segments) and eL < 3e-4
+
+
+def test_auto_tests_its_region_at_once_after_a_command():
+    """A small rate change at 20 s of the 40 s `three_stators`: `auto` stops at the command and averages on from
+    there (no full-model pause of a tenth of the slow time)."""
+    s = _three_stators(duration=40.0, commands=[{"time": 20.0, "stator": "z3", "rate": 201.0}])
+    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    assert hy.averaged_segments == [(0.0, 20.0), (20.0, 40.0)]
+
+
+def test_event_sampling_is_kept_in_the_full_stretches_of_auto():
+    """`sampling: events` under `auto`: the full-model stretch near the pole switches at the law's exact
+    instants (commands off the tick grid), as in `full`."""
+    s = gyro_sim.load_scene("nutation_slow", overrides={"controller.sampling": "events", "duration": 7.5})
+    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    h = s.controller.period
+    off_grid = [t for t, *_ in hy.commands if abs(t / h - round(t / h)) > 1e-6]
+    print(f"\n  averaged {hy.averaged_segments}; {len(off_grid)} commands between ticks; θ end "
+          f"{math.degrees(hy.theta[-1]):.3f}°")
+    assert hy.averaged_segments and len(off_grid) > 10 and hy.theta[-1] < math.radians(0.1)
