@@ -46,7 +46,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .averaged_m import AveragedM, averaged_m_model
-from .slow_k import ENTER_MARGIN, SlowK, slow_k_of
+from .slow_k import ENTER_MARGIN, MU_MAX, SlowK, slow_k_of
 from .slow_k import slow_state as slow_k_state
 from .frames import attitude_from_euler, nutation_angle, quat_to_matrix
 from .scene import Scene, SceneError
@@ -54,7 +54,6 @@ from .simulate import RunResult, Runner
 
 THETA_MAX = 0.1  # rad
 RHO_MAX = 1e-3  # rad
-MU_MAX = 1e-3
 RECHECK = 0.1  # the regions are tested again after this fraction of the slow time |L|/|N|
 
 
@@ -253,7 +252,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
         if win is not None:
             until = win.end
         elif r.row > 0:
-            cmd = (sim.current.tobytes(), sim.rate.tobytes())
+            cmd = commands_key(sim)
             if sim.t >= next_test or cmd != tested_cmd:
                 n, model, edge, why = _averaged_stretch_if_any(r, law, switched, cmd_times, segments)
                 if model is not None:
@@ -262,7 +261,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
                     if edge and switched:  # the rebuilt attitude needs its switching signs at once
                         r.apply_commands(law(r.control_input()))
                     next_test = sim.t + _recheck(sim) if edge else -math.inf
-                    tested_cmd = (sim.current.tobytes(), sim.rate.tobytes())
+                    tested_cmd = commands_key(sim)
                     continue
                 if strict and not segments:
                     raise SceneError(f"fidelity = 'averaged': the averaged model does not hold at t = {sim.t:g} s: "
@@ -296,7 +295,7 @@ def _averaged_stretch_if_any(r: Runner, law, switched: set, cmd_times: list, seg
         return _averaged_stretch(r, k, cmd_times, segments), "spin-up", False, ""
     m, why_m = m_region(r)
     if m is not None:
-        n, edge = _m_stretch(r, m, segments)
+        n, edge = _m_stretch(r, m, cmd_times, segments)
         return n, "[M]", edge, ""
     kk, why_k = k_region(r)
     if kk is not None:
@@ -322,6 +321,33 @@ def law_settled(r: Runner, law, switched: set = frozenset()) -> tuple[bool, str]
     return True, ""
 
 
+def commands_key(sim) -> tuple:
+    """A hashable key of the stator commands in force (currents and rates)."""
+    return sim.current.tobytes(), sim.rate.tobytes()
+
+
+def _stretch_end(r: Runner, cmd_times: list) -> float:
+    """Where an averaged stretch from now must end at the latest (s): the next scheduled command, the next
+    output window or the end of the run."""
+    t0 = r.sim.t
+    return min(next((t for t in cmd_times if t > t0 + 1e-12), r.T), r.scene.output.next_window_start(t0))
+
+
+def _integrate_slow(r: Runner, rhs, y0: np.ndarray, atol: np.ndarray, events: list, t_end: float, what: str):
+    """Integrate a slow model (DOP853, rtol 1e-10, dense output) from now to ``t_end`` or its first terminal
+    event. Returns (solution, the output rows it covers, t1, y(t1), whether an event ended it)."""
+    t0 = r.sim.t
+    rows = np.nonzero((r.t_out > t0 + 1e-12) & (r.t_out <= t_end))[0]
+    sol = solve_ivp(rhs, (t0, t_end), y0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
+                    dense_output=True, events=events)
+    if sol.status < 0:
+        raise RuntimeError(f"{what} averaged model: integration failed: {sol.message}")
+    exits = [(float(te[0]), ye[0]) for te, ye in zip(sol.t_events, sol.y_events) if te.size]
+    t1, y1 = min(exits, key=lambda e: e[0]) if exits else (t_end, sol.sol(t_end))
+    n = int(np.count_nonzero(r.t_out[rows] <= t1 + 1e-12 * max(1.0, t1)))
+    return sol, rows[:n], t1, y1, bool(exits)
+
+
 def _recheck(sim) -> float:
     """Simulated time (s) until the regions are tested again: ``RECHECK`` × the slow time |L|/|N|; 0 (the next
     sample) at rest or without torque (e.g. at the switch-on, before the eddy currents build up)."""
@@ -334,7 +360,7 @@ def _averaged_stretch(r: Runner, k: int, cmd_times: list, segments: list) -> int
     """Jump the runner over an averaged stretch to the next command (or the end). Returns RHS evaluations."""
     sim = r.sim
     t0 = sim.t
-    t1 = min(next((t for t in cmd_times if t > t0 + 1e-12), r.T), r.scene.output.next_window_start(t0))
+    t1 = _stretch_end(r, cmd_times)
     model = _model(r, k)
     L0 = float(np.linalg.norm(sim.y[0:3]))
     theta0 = r.control_input().theta
@@ -407,24 +433,17 @@ def _m_outputs(L, rho, sigma, theta) -> tuple[np.ndarray, np.ndarray]:
     return Lc, np.where(q[:, :1] < 0, -q, q)  # w ≥ 0, as frames.matrix_to_quat gives
 
 
-def _m_stretch(r: Runner, model: AveragedM, segments: list) -> tuple[int, bool]:
+def _m_stretch(r: Runner, model: AveragedM, cmd_times: list, segments: list) -> tuple[int, bool]:
     """Jump the runner over a stretch of [M]'s averaged model: to the end of the run (or the next output
     window), or to the instant its solution leaves the region (located by events between samples; there back
     to the full model). Returns (RHS evaluations, whether it ended at the region's edge)."""
     sim = r.sim
     t0 = sim.t
-    t_end = min(r.T, r.scene.output.next_window_start(t0))
-    rows = np.nonzero((r.t_out > t0 + 1e-12) & (r.t_out <= t_end))[0]
     y0 = slow_state(sim)
     atol = np.array([1e-12 * max(y0[0], 1e-300), 1e-12, 1e-12, 1e-12])
-    sol = solve_ivp(model.rhs, (t0, t_end), y0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
-                    dense_output=True, events=model.exit_events(MU_MAX))
-    if sol.status < 0:
-        raise RuntimeError(f"[M] averaged model: integration failed: {sol.message}")
-    exits = [(float(te[0]), ye[0]) for te, ye in zip(sol.t_events, sol.y_events) if te.size]
-    t1, y1 = min(exits, key=lambda e: e[0]) if exits else (t_end, sol.sol(t_end))
-    n = int(np.count_nonzero(r.t_out[rows] <= t1 + 1e-12 * max(1.0, t1)))
-    rows = rows[:n]
+    sol, rows, t1, y1, edge = _integrate_slow(r, model.rhs, y0, atol, model.exit_events(MU_MAX),
+                                              _stretch_end(r, cmd_times), "[M]")
+    n = rows.size
     if n:
         ts = r.t_out[rows]
         Lc, q = _m_outputs(*sol.sol(ts))
@@ -437,7 +456,7 @@ def _m_stretch(r: Runner, model: AveragedM, segments: list) -> tuple[int, bool]:
     _jump(r, n, t0, t1)
     segments.append((t0, t1))
     _m_handover_to_full(sim, y1)
-    return int(sol.nfev), bool(exits)
+    return int(sol.nfev), edge
 
 
 def _m_handover_to_full(sim, y_slow: np.ndarray) -> None:
@@ -468,7 +487,7 @@ def _steady_modes(sim) -> None:
 def k_region(runner: Runner) -> tuple[Optional[SlowK], str]:
     """([K]'s averaged model, '') if it holds at the runner's present state and commands, else (None, why)."""
     cache = runner.__dict__.setdefault("_slow_k", {})
-    key = (runner.sim.current.tobytes(), runner.sim.rate.tobytes())
+    key = commands_key(runner.sim)
     if key not in cache:
         cache[key] = slow_k_of(runner)
     model, why = cache[key]
@@ -485,17 +504,11 @@ def _k_stretch(r: Runner, model: SlowK, cmd_times: list, segments: list) -> tupl
     at the region's edge)."""
     sim = r.sim
     t0 = sim.t
-    t_end = min(next((t for t in cmd_times if t > t0 + 1e-12), r.T), r.scene.output.next_window_start(t0))
-    rows = np.nonzero((r.t_out > t0 + 1e-12) & (r.t_out <= t_end))[0]
     x0 = slow_k_state(sim)
     atol = np.array([1e-12 * float(np.linalg.norm(x0[0:3]))] * 3 + [1e-12])
-    sol = solve_ivp(model.rhs, (t0, t_end), x0, method="DOP853", t_eval=r.t_out[rows], rtol=1e-10, atol=atol,
-                    dense_output=True, events=model.exit_event())
-    if sol.status < 0:
-        raise RuntimeError(f"[K] averaged model: integration failed: {sol.message}")
-    t1, x1 = (float(sol.t_events[0][0]), sol.y_events[0][0]) if sol.t_events[0].size else (t_end, sol.sol(t_end))
-    n = int(np.count_nonzero(r.t_out[rows] <= t1 + 1e-12 * max(1.0, t1)))
-    rows = rows[:n]
+    sol, rows, t1, x1, edge = _integrate_slow(r, model.rhs, x0, atol, [model.exit_event()],
+                                              _stretch_end(r, cmd_times), "[K]")
+    n = rows.size
     if n:
         X = sol.sol(r.t_out[rows])
         L, th = X[0:3].T, X[3]
@@ -505,7 +518,7 @@ def _k_stretch(r: Runner, model: SlowK, cmd_times: list, segments: list) -> tupl
     sim.y[0:3], sim.y[3:7] = x1[0:3], _k_attitude(x1[None, 0:3], x1[3:4])[0]
     _steady_modes(sim)
     r.apply_scene_commands()
-    return int(sol.nfev), bool(sol.t_events[0].size)
+    return int(sol.nfev), edge
 
 
 def _k_attitude(L: np.ndarray, theta: np.ndarray) -> np.ndarray:

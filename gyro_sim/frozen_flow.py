@@ -85,6 +85,14 @@ def _integrals(z, ez, h):
 
 
 @njit(cache=True, inline="always")
+def _mode_mismatch(y, S, n, scale):
+    """``scale`` × (e_n − Re S_n): eddy mode n's departure from its particular solution S_n (T), whose free decay
+    the pass adds to the moment (scale = c_m w_n gives A·m²)."""
+    i0 = 7 + 3 * n
+    return scale * (y[i0] - S[n, 0].real), scale * (y[i0 + 1] - S[n, 1].real), scale * (y[i0 + 2] - S[n, 2].real)
+
+
+@njit(cache=True, inline="always")
 def _field_half(A, q, sg, z, ez, om_q, eo_q):
     """Half sg of phasor q of B = ½ Σ_q (a_q e^{iν_q s} + conj) (T) times a moment term e^{z s}: (a or ā, the
     product's exponent z ± iν_q, its factor at s = h)."""
@@ -190,10 +198,7 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 k += 1
     # free decay of each mode's mismatch with its particular solution: D_n e^{−s/τ_n} (body, real)
     for n in range(nm):
-        i0 = 7 + 3 * n
-        d0 = c_m * w[n] * (y[i0] - S[n, 0].real)
-        d1 = c_m * w[n] * (y[i0 + 1] - S[n, 1].real)
-        d2 = c_m * w[n] * (y[i0 + 2] - S[n, 2].real)
+        d0, d1, d2 = _mode_mismatch(y, S, n, c_m * w[n])
         dec = math.exp(-lam[n] * h)
         for m2 in range(-1, 2):
             e0 = 1.0 if ax == 0 else 0.0
@@ -377,10 +382,7 @@ def _case_pass(Lx, Ly, Lz, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, 
         EZ[k] = EO[p]
         k += 1
     for n in range(nm):
-        i0 = 7 + 3 * n
-        d0 = c_m * w[n] * (y[i0] - S[n, 0].real)
-        d1 = c_m * w[n] * (y[i0 + 1] - S[n, 1].real)
-        d2 = c_m * w[n] * (y[i0 + 2] - S[n, 2].real)
+        d0, d1, d2 = _mode_mismatch(y, S, n, c_m * w[n])
         dec = math.exp(-lam[n] * h)
         for m3 in range(-1, 2):
             X[k, 0], X[k, 1], X[k, 2] = _proj(m3, l0, l1, l2, d0 + 0j, d1 + 0j, d2 + 0j)
@@ -423,9 +425,7 @@ def frozen_flow_step_case(y, s, h, Bre, Bim, om, J, lam, w, c_m, tail, nm, A, X,
     for n in range(nm):
         dec = math.exp(-lam[n] * h)
         i0 = 7 + 3 * n
-        e0 = y[i0] - S[n, 0].real
-        e1 = y[i0 + 1] - S[n, 1].real
-        e2 = y[i0 + 2] - S[n, 2].real
+        e0, e1, e2 = _mode_mismatch(y, S, n, 1.0)
         d = (l0 * e0 + l1 * e1 + l2 * e2) * (1.0 - c)  # Rodrigues: Rot(l̂, φ) e
         y[i0] = dec * (e0 * c + (l1 * e2 - l2 * e1) * sn + l0 * d) + E_end[n, 0].real
         y[i0 + 1] = dec * (e1 * c + (l2 * e0 - l0 * e2) * sn + l1 * d) + E_end[n, 1].real

@@ -42,7 +42,7 @@ import numpy as np
 from .averaged import k21_torque, k_e_of_scene
 from .frames import nutation_angle
 
-MU_MAX = 1e-3
+MU_MAX = 1e-3  # the averaging parameter's bound of every averaged model in the hybrid (gyro_sim/fidelity.py)
 PSI_STEP_MAX = 0.05
 ENTER_MARGIN = 0.8  # a run enters the region where every ratio is ≤ 0.8 and leaves it where one reaches 1
 SWITCHED_RATIO_MIN = 10.0  # |ν_n| and ||ν_j| − |ν_k|| in units of Λ, switched stators
