@@ -59,6 +59,8 @@ setup(
             'ros-sensor-msgs>=5.3',
             'ros-rosgraph-msgs>=2.0',
             'ros-builtin-interfaces>=2.0',
+            'ros-diagnostic-msgs>=5.3',  # /diagnostics
+            'ros-std-srvs>=5.3',  # pause / resume / step / reset services
         ],
         # ros2/examples declare test deps as the 'test' extra (tests_require is gone
         # from setuptools).

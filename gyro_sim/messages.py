@@ -32,12 +32,24 @@ topic                      type                          frame_id        content
                                                                          ∫Ω_f dt (rad), velocity = Ω_f (rad/s);
                                                                          ``damper_x|y|z`` position = u (m),
                                                                          velocity = u̇ (m/s), body frame
-``/gyro/status``           std_msgs/msg/String           —               watchdog / refusals / info text
+``/gyro/status``           std_msgs/msg/String           —               watchdog / refusals / info text (latched)
 ``/gyro/scene``            std_msgs/msg/String           —               scene file text (latched)
+``/tf``                    tf2_msgs/msg/TFMessage        gyro_case       gyro_case → gyro_rotor (attitude) and
+                                                                         gyro_case → gyro_l_frame, each sample
+``/tf_static``             tf2_msgs/msg/TFMessage        gyro_case       gyro_case → gyro_stator_<name> (the
+                                                                         stator triad e1, e2, axis), once
+``/diagnostics``           diagnostic_msgs/msg/          —               run state, real-time factor, refusals,
+                           DiagnosticArray                               watchdog (about 1 Hz wall)
 ``/clock``                 rosgraph_msgs/msg/Clock       —               simulation time
 =========================  ============================  ==============  =====================================
 
-QoS (:data:`QOS`): reliable, keep_last 100, volatile; ``/gyro/scene`` transient_local depth 1.
+QoS (:data:`QOS`): reliable, keep_last 100, volatile; ``/gyro/scene`` and ``/tf_static`` transient_local
+depth 1 and ``/gyro/status`` transient_local depth 100 (a late subscriber gets the scene, the static frames and
+the status lines so far).
+
+The names above are the canonical ones (bags keep them). The nodes use them relative to their namespace
+(:func:`node_topic`): ``gyro/imu``, ``tf``..., so ``-r __ns:=/unit2`` moves a gyroscope's topics to
+``/unit2/gyro/...`` and ``/unit2/tf``; ``/clock`` and ``/diagnostics`` stay global (ROS convention).
 
 Our arrays hold quaternions as (w, x, y, z); ROS messages as (x, y, z, w): the builders
 convert.
@@ -51,9 +63,10 @@ __all__ = [
     "NAMESPACE", "FRAME_ROTOR", "FRAME_CASE", "FRAME_L",
     "TOPIC_IMU", "TOPIC_KINETIC_MOMENT", "TOPIC_EULER", "TOPIC_TORQUE", "TOPIC_STATORS",
     "TOPIC_STATOR_COMMANDS", "TOPIC_EFFECTS", "effects_message", "TOPIC_STATUS", "TOPIC_SCENE", "TOPIC_CLOCK",
-    "TOPICS", "FRAME_IDS", "QOS", "STATE_TOPICS",
+    "TOPIC_TF", "TOPIC_TF_STATIC", "TOPIC_DIAGNOSTICS", "FRAME_STATOR_PREFIX",
+    "TOPICS", "FRAME_IDS", "QOS", "STATE_TOPICS", "node_topic",
     "stamp", "stamp_ns", "state_messages", "command_message", "status_message", "scene_message",
-    "clock_message", "to_ros", "to_rosbags",
+    "clock_message", "tf_static_message", "diagnostics_message", "to_ros", "to_rosbags",
 ]
 
 NAMESPACE = "/gyro"
@@ -62,6 +75,7 @@ NAMESPACE = "/gyro"
 FRAME_ROTOR = "gyro_rotor"  # body frame x1, x2, x3 (x3 = polar axis)
 FRAME_CASE = "gyro_case"  # case frame z1, z2, z3 (stators fixed)
 FRAME_L = "gyro_l_frame"  # the L-frame (its third axis along L)
+FRAME_STATOR_PREFIX = "gyro_stator_"  # + stator name: the stator triad (e1, e2, axis u), fixed in the case
 
 # --- topics ---------------------------------------------------------------------------------
 TOPIC_IMU = NAMESPACE + "/imu"
@@ -74,6 +88,9 @@ TOPIC_EFFECTS = NAMESPACE + "/effects"
 TOPIC_STATUS = NAMESPACE + "/status"
 TOPIC_SCENE = NAMESPACE + "/scene"
 TOPIC_CLOCK = "/clock"
+TOPIC_TF = "/tf"
+TOPIC_TF_STATIC = "/tf_static"
+TOPIC_DIAGNOSTICS = "/diagnostics"
 
 #: topic → ROS 2 message type (``pkg/msg/Name``)
 TOPICS: dict[str, str] = {
@@ -87,7 +104,19 @@ TOPICS: dict[str, str] = {
     TOPIC_STATUS: "std_msgs/msg/String",
     TOPIC_SCENE: "std_msgs/msg/String",
     TOPIC_CLOCK: "rosgraph_msgs/msg/Clock",
+    TOPIC_TF: "tf2_msgs/msg/TFMessage",
+    TOPIC_TF_STATIC: "tf2_msgs/msg/TFMessage",
+    TOPIC_DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
 }
+
+#: topics that keep their absolute name in a namespaced node (ROS convention: one clock, one diagnostics bus)
+GLOBAL_TOPICS = (TOPIC_CLOCK, TOPIC_DIAGNOSTICS)
+
+
+def node_topic(topic: str) -> str:
+    """The name a node uses for a canonical topic: relative to the node's namespace (``/gyro/imu`` →
+    ``gyro/imu``, ``/tf`` → ``tf``), except :data:`GLOBAL_TOPICS`. In the root namespace both resolve alike."""
+    return topic if topic in GLOBAL_TOPICS else topic.lstrip("/")
 
 #: topic → header.frame_id ('' for JointState: joints carry no frame; absent = no header)
 FRAME_IDS: dict[str, str] = {
@@ -104,10 +133,12 @@ _DEFAULT_QOS = {"reliability": "reliable", "history": "keep_last", "depth": 100,
 #: topic → QoS, as plain words (rclpy: ReliabilityPolicy.RELIABLE, HistoryPolicy.KEEP_LAST, ...)
 QOS: dict[str, dict[str, Any]] = {topic: dict(_DEFAULT_QOS) for topic in TOPICS}
 QOS[TOPIC_SCENE] = {"reliability": "reliable", "history": "keep_last", "depth": 1, "durability": "transient_local"}
+QOS[TOPIC_TF_STATIC] = dict(QOS[TOPIC_SCENE])  # as tf2's static broadcaster
+QOS[TOPIC_STATUS] = dict(QOS[TOPIC_SCENE], depth=100)  # latched: a late subscriber sees the start line
 
 #: the topics published once per output sample, in the order :func:`state_messages` gives them
 STATE_TOPICS: tuple[str, ...] = (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE,
-                                 TOPIC_STATORS)
+                                 TOPIC_TF, TOPIC_STATORS)
 
 _UNKNOWN_COV = [0.0] * 9  # all zeros: "covariance unknown" (sensor_msgs/Imu)
 _NOT_PROVIDED_COV = [-1.0] + [0.0] * 8  # element 0 = −1: "no estimate of this quantity"
@@ -219,8 +250,60 @@ def state_messages(t: float, L: Any, q_wxyz: Any, omega_b: Any, euler: Any, torq
         TOPIC_KINETIC_MOMENT: _vector3_stamped(dict(time), FRAME_CASE, L, "L"),
         TOPIC_EULER: _vector3_stamped(dict(time), FRAME_L, euler, "euler"),
         TOPIC_TORQUE: _vector3_stamped(dict(time), FRAME_CASE, torque, "torque"),
+        TOPIC_TF: {"transforms": [_transform(time, FRAME_ROTOR, (w, x, y, z)),
+                                  _transform(time, FRAME_L, _l_frame_quat(_vec3(L, "L")))]},
         TOPIC_STATORS: _joint_state(dict(time), names, "stators", position=phase, velocity=rate, effort=current),
     }
+
+
+def _transform(time: dict, child: str, q_wxyz: Sequence[float]) -> dict:
+    """geometry_msgs/TransformStamped gyro_case → ``child``: a pure rotation (the rotor turns about a fixed
+    point, the case origin), q = (w, x, y, z) child → case."""
+    w, x, y, z = q_wxyz
+    return {"header": _header(dict(time), FRAME_CASE), "child_frame_id": child,
+            "transform": {"translation": {"x": 0.0, "y": 0.0, "z": 0.0},
+                          "rotation": {"x": x, "y": y, "z": z, "w": w}}}
+
+
+def _l_frame_quat(L: Sequence[float]) -> tuple[float, float, float, float]:
+    """(w, x, y, z) of the L-frame Y = Rz(σ) Ry(ρ) (:func:`gyro_sim.frames.l_frame`: ρ the polar angle of L
+    from z3, σ its azimuth; σ = 0 where L ∥ z3, Y = I where L = 0), scalar code."""
+    Lx, Ly, Lz = L
+    h = math.hypot(Lx, Ly)
+    rho = math.atan2(h, Lz)
+    sig = math.atan2(Ly, Lx) if h > 0.0 else 0.0
+    cr, sr, cs, ss = math.cos(rho / 2), math.sin(rho / 2), math.cos(sig / 2), math.sin(sig / 2)
+    return cs * cr, -ss * sr, cs * sr, ss * cr
+
+
+def tf_static_message(names: Sequence[str], triads: Sequence[Sequence[Sequence[float]]]) -> dict:
+    """``/tf_static``: gyro_case → ``gyro_stator_<name>`` for each stator, the frame whose x, y, z axes are the
+    stator's triad (e1, e2, u) in case coordinates (``triads[k]`` = (e1, e2, u)), stamped 0."""
+    import numpy as np
+
+    from .frames import matrix_to_quat
+
+    out = []
+    for name, (e1, e2, u) in zip(names, triads):
+        R = [[float(e1[i]), float(e2[i]), float(u[i])] for i in range(3)]
+        out.append(_transform(_time(0.0), FRAME_STATOR_PREFIX + str(name), matrix_to_quat(np.array(R)).tolist()))
+    return {"transforms": out}
+
+
+#: diagnostic_msgs/DiagnosticStatus levels
+DIAG_OK, DIAG_WARN, DIAG_ERROR, DIAG_STALE = 0, 1, 2, 3
+
+
+def diagnostics_message(t: float, name: str, hardware_id: str, level: int, message: str,
+                        values: Mapping[str, Any]) -> dict:
+    """``/diagnostics``: one DiagnosticStatus (``level`` 0 OK, 1 WARN, 2 ERROR, 3 STALE) with key/value pairs,
+    stamped at simulation time t."""
+    if level not in (DIAG_OK, DIAG_WARN, DIAG_ERROR, DIAG_STALE):
+        raise ValueError(f"diagnostics level = {level!r}: allowed 0 (OK), 1 (WARN), 2 (ERROR), 3 (STALE)")
+    return {"header": _header(_time(t), ""),
+            "status": [{"level": level, "name": str(name), "message": str(message),
+                        "hardware_id": str(hardware_id),
+                        "values": [{"key": str(k), "value": str(v)} for k, v in values.items()]}]}
 
 
 def effects_message(t: float, effects: Mapping[str, Any]) -> Optional[dict]:
@@ -287,6 +370,8 @@ def _fill_ros(obj: Any, fields: Mapping[str, Any]) -> None:
             raise ValueError(f"{type(obj).__name__} has no field {key!r}")
         if isinstance(value, Mapping):
             _fill_ros(getattr(obj, key), value)
+        elif isinstance(value, int) and getattr(obj, "get_fields_and_field_types", dict)().get(key) == "octet":
+            setattr(obj, key, bytes([value]))  # rclpy takes an octet as 1 byte (an int would serialize wrongly)
         elif isinstance(value, (list, tuple)) and value and isinstance(value[0], Mapping):
             cls = _ros_element_class(obj, key)
             setattr(obj, key, [to_ros(cls, v) for v in value])

@@ -44,15 +44,16 @@ import yaml
 
 from . import __version__
 from .messages import (
-    QOS, TOPIC_CLOCK, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS,
-    TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, command_message, effects_message, scene_message, stamp_ns,
-    state_messages, status_message, to_rosbags,
+    QOS, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE,
+    TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS,
+    command_message, effects_message, scene_message, stamp_ns, state_messages, status_message, tf_static_message,
+    to_rosbags,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
     from .simulate import RunResult
 
-__all__ = ["BagRecorder", "BagData", "record_result", "scene_text", "read_bag", "bag_info", "sigterm_as_interrupt",
+__all__ = ["BagRecorder", "BagData", "record_result", "stator_frames", "scene_text", "read_bag", "bag_info", "sigterm_as_interrupt",
            "BAG_VERSION", "CUSTOM_KEYS"]
 
 BAG_VERSION = 8  # rosbag2 metadata format version: the newest that ROS 2 Humble reads
@@ -151,7 +152,8 @@ class BagRecorder:
 
     ``path`` is the bag directory to create; it must not exist (refused with FileExistsError
     before anything is written). ``scene_text`` is the scene file's text, ``scene_name`` its
-    name, ``extra`` more custom_data entries (str → str/number).
+    name, ``extra`` more custom_data entries (str → str/number), ``static_tf`` the ``/tf_static`` message
+    (:func:`gyro_sim.messages.tf_static_message`, e.g. :func:`stator_frames`), written with the scene.
 
     Leaving the ``with`` block, normally or by an exception (KeyboardInterrupt included),
     closes the bag: everything written so far is in a complete, indexed file; custom_data
@@ -160,7 +162,7 @@ class BagRecorder:
     """
 
     def __init__(self, path: Union[str, os.PathLike], scene_text: str, scene_name: str,
-                 extra: Optional[Mapping[str, Any]] = None):
+                 extra: Optional[Mapping[str, Any]] = None, static_tf: Optional[Mapping[str, Any]] = None):
         from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
         self._writer = None
@@ -207,6 +209,7 @@ class BagRecorder:
             raise
         self._lock = threading.Lock()
         self._scene_fields = scene_message(scene_text)
+        self._static_tf = dict(static_tf) if static_tf is not None else None
         self._scene_written = False
         self._end = "complete"
         self.counts = {topic: 0 for topic in TOPICS}
@@ -259,6 +262,9 @@ class BagRecorder:
             if not self._scene_written:
                 w.write(self._conns[TOPIC_SCENE], ns, self._serialize(TOPIC_SCENE, self._scene_fields))
                 self.counts[TOPIC_SCENE] += 1
+                if self._static_tf is not None:
+                    w.write(self._conns[TOPIC_TF_STATIC], ns, self._serialize(TOPIC_TF_STATIC, self._static_tf))
+                    self.counts[TOPIC_TF_STATIC] += 1
                 self._scene_written = True
             for topic, data in items:
                 w.write(self._conns[topic], ns, data)
@@ -281,6 +287,10 @@ class BagRecorder:
         """A stator command at time t: currents (A) and/or signed rates (rad/s) of the named stators."""
         data = self._serialize(TOPIC_STATOR_COMMANDS, command_message(t, names, current, rate))
         self._write(stamp_ns(t), [(TOPIC_STATOR_COMMANDS, data)])
+
+    def write_diagnostics(self, t: float, fields: Mapping[str, Any]) -> None:
+        """A ``/diagnostics`` message (:func:`gyro_sim.messages.diagnostics_message`) logged at time t."""
+        self._write(stamp_ns(t), [(TOPIC_DIAGNOSTICS, self._serialize(TOPIC_DIAGNOSTICS, dict(fields)))])
 
     def write_status(self, t: float, text: str) -> None:
         """A status text (watchdog, refusal, info) logged at time t."""
@@ -335,6 +345,13 @@ def _command_values(values: Sequence[Optional[float]]) -> Optional[list]:
     return [math.nan if v is None else float(v) for v in values]
 
 
+def stator_frames(scene) -> dict:
+    """The ``/tf_static`` message of a scene: gyro_case → gyro_stator_<name>, axes = each stator's triad."""
+    from .simulate import stator_triad
+
+    return tf_static_message([st.name for st in scene.stators], [stator_triad(st.axis) for st in scene.stators])
+
+
 def record_result(result: "RunResult", path: Union[str, os.PathLike],
                   extra: Optional[Mapping[str, Any]] = None) -> Path:
     """Write a whole in-process :class:`~gyro_sim.simulate.RunResult` as a bag at ``path``.
@@ -367,7 +384,7 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
             result.euler.tolist(), result.torque.tolist(), result.current.tolist(),
             result.field_rate.tolist(), result.field_phase.tolist())
     effects = getattr(result, "effects", None) or {}
-    with BagRecorder(path, text, scene.name, extra=ext) as rec:
+    with BagRecorder(path, text, scene.name, extra=ext, static_tf=stator_frames(scene)) as rec:
         gi = 0
         for i, (t, L, q, w, e, N, I, r, ph) in enumerate(zip(*rows)):
             # a sample at a command's time is taken before the command (simulate.run)
@@ -459,7 +476,8 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
     eff_msgs: list = []
     with Reader(path) as reader:
         custom = _custom_data(reader, path)
-        conns = [c for c in reader.connections if c.topic in TOPICS and c.msgtype == TOPICS[c.topic]]
+        conns = [c for c in reader.connections if c.topic in TOPICS and c.msgtype == TOPICS[c.topic]
+                 and c.topic not in (TOPIC_TF, TOPIC_TF_STATIC, TOPIC_DIAGNOSTICS)]  # (not in BagData)
         for conn, log_ns, raw in reader.messages(connections=conns):
             topic = conn.topic
             m = des(raw, conn.msgtype)

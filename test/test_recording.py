@@ -24,7 +24,7 @@ import gyro_sim
 from gyro_sim import messages as gm
 from gyro_sim.recording import BagRecorder, bag_info, read_bag, record_result
 
-STATE_TOPICS = ["/clock", "/gyro/imu", "/gyro/kinetic_moment", "/gyro/euler", "/gyro/torque", "/gyro/stators"]
+STATE_TOPICS = ["/clock", "/gyro/imu", "/gyro/kinetic_moment", "/gyro/euler", "/gyro/torque", "/tf", "/gyro/stators"]
 NAMES = ["z1", "z2", "z3"]
 
 # the default scene plus commands, two of them at the same time
@@ -101,16 +101,19 @@ def test_mcap_is_ros2_profile_with_qos_and_statistics(recorded):
         (qos,) = yaml.safe_load(ch.metadata["offered_qos_profiles"])
         assert qos["reliability"] == 1  # reliable
         assert qos["history"] == 1  # keep_last
-        if topic == "/gyro/scene":
+        if topic in ("/gyro/scene", "/tf_static"):
             assert (qos["durability"], qos["depth"]) == (1, 1)  # transient_local, depth 1
+        elif topic == "/gyro/status":
+            assert (qos["durability"], qos["depth"]) == (1, 100)  # transient_local: a late subscriber sees it
         else:
             assert (qos["durability"], qos["depth"]) == (2, 100)  # volatile, depth 100
     # statistics: the right counts per channel
     counts = {ch.topic: stats.channel_message_counts.get(cid, 0) for cid, ch in channels.items()}
     expected = {t: n for t in STATE_TOPICS}
-    expected.update({"/gyro/scene": 1, "/gyro/stator_commands": 2, "/gyro/status": 0, "/gyro/effects": 0})
+    expected.update({"/gyro/scene": 1, "/tf_static": 1, "/gyro/stator_commands": 2, "/gyro/status": 0,
+                     "/gyro/effects": 0, "/diagnostics": 0})
     assert counts == expected
-    assert stats.message_count == 6 * n + 3
+    assert stats.message_count == 7 * n + 4
     assert stats.message_start_time == 0
     assert stats.message_end_time == 500_000_000
     # the rosbag2 metadata record (what ros2 bag reads from a bare .mcap) carries custom_data
@@ -128,7 +131,7 @@ def test_metadata_yaml_is_version_8_mcap(recorded):
     assert info["version"] == 8
     assert info["storage_identifier"] == "mcap"
     assert info["relative_file_paths"] == [mcap_file(bag).name]
-    assert info["message_count"] == 6 * len(res.t) + 3
+    assert info["message_count"] == 7 * len(res.t) + 4
     assert info["duration"]["nanoseconds"] == 500_000_000
     topics = {x["topic_metadata"]["name"]: x for x in info["topics_with_message_count"]}
     assert set(topics) == set(gm.TOPICS)
@@ -165,8 +168,9 @@ def test_values_bit_exact_by_independent_reader(recorded):
         got = topic_msgs[topic]
         assert len(got) == n, topic
         st = got[0][1].clock if topic == "/clock" else None
-        stamps = np.array([(m.clock if topic == "/clock" else m.header.stamp).sec * 10**9
-                           + (m.clock if topic == "/clock" else m.header.stamp).nanosec for _, m in got])
+        when = {"/clock": lambda m: m.clock, "/tf": lambda m: m.transforms[0].header.stamp}.get(
+            topic, lambda m: m.header.stamp)
+        stamps = np.array([when(m).sec * 10**9 + when(m).nanosec for _, m in got])
         assert st is None or st.sec == 0
         assert np.array_equal(stamps, want_ns), topic  # header stamp = simulation time (ns)
         assert np.array_equal([lt for lt, _ in got], want_ns), topic  # log time = stamp
@@ -205,6 +209,26 @@ def test_values_bit_exact_by_independent_reader(recorded):
     (scene,) = topic_msgs["/gyro/scene"]
     assert scene[0] == 0 and scene[1].data == recorded["scene_text"]
     assert "/gyro/status" not in topic_msgs
+    # /tf: gyro_case → gyro_rotor is the attitude (bit for bit), gyro_case → gyro_l_frame the L-frame
+    from gyro_sim.frames import l_frame, quat_to_matrix
+
+    tf = [m for _, m in topic_msgs["/tf"]]
+    assert all([(x.header.frame_id, x.child_frame_id) for x in m.transforms]
+               == [("gyro_case", "gyro_rotor"), ("gyro_case", "gyro_l_frame")] for m in tf)
+    rot = lambda x: [x.transform.rotation.w, x.transform.rotation.x, x.transform.rotation.y, x.transform.rotation.z]  # noqa: E731
+    assert_bit_equal([rot(m.transforms[0]) for m in tf], res.q, "tf gyro_rotor")
+    R_L = quat_to_matrix(np.array([rot(m.transforms[1]) for m in tf]))
+    err = np.max(np.abs(R_L - l_frame(res.L)))
+    print(f"\n  /tf gyro_l_frame against frames.l_frame(L): max |ΔR| = {err:.1e} (tolerance 1e-14)")
+    assert err < 1e-14
+    assert all(x.transform.translation.x == x.transform.translation.y == x.transform.translation.z == 0.0
+               for m in tf for x in m.transforms)
+    # /tf_static (once, with the scene): each stator's frame has its axis as z
+    ((t_static, static),) = topic_msgs["/tf_static"]
+    assert t_static == 0 and [x.child_frame_id for x in static.transforms] == [f"gyro_stator_{n}" for n in NAMES]
+    scene_axes = [np.asarray(st.axis, float) / np.linalg.norm(st.axis) for st in recorded["scene"].stators]
+    for x, u in zip(static.transforms, scene_axes):
+        assert np.allclose(quat_to_matrix(np.array(rot(x)))[:, 2], u, atol=1e-15), x.child_frame_id
 
 
 # --- rosbags' reader (read_bag, bag_info) ---------------------------------------------------
@@ -240,7 +264,7 @@ def test_bag_info(recorded):
     res, bag = recorded["result"], recorded["bag"]
     info = bag_info(bag)
     assert info["bag_version"] == 8 and info["storage"] == "mcap"
-    assert info["message_count"] == 6 * len(res.t) + 3
+    assert info["message_count"] == 7 * len(res.t) + 4
     assert (info["start"], info["end"], info["duration"]) == (0.0, 0.5, 0.5)
     assert info["topics"]["/gyro/imu"] == {"type": "sensor_msgs/msg/Imu", "count": len(res.t)}
     assert info["topics"]["/gyro/scene"] == {"type": "std_msgs/msg/String", "count": 1}
@@ -327,9 +351,9 @@ def test_keyboard_interrupt_leaves_a_complete_bag(tmp_path, recorded):
     # the independent reader: a finished file (summary, statistics) with every message
     with open(mcap_file(path), "rb") as f:
         summary = make_reader(f).get_summary()
-    assert summary is not None and summary.statistics.message_count == 6 * k + 3
+    assert summary is not None and summary.statistics.message_count == 7 * k + 3
     msgs = decoded(path)
-    assert len(msgs) == 6 * k + 3
+    assert len(msgs) == 7 * k + 3
     d = read_bag(path)
     assert len(d) == k
     assert_bit_equal(d.L, res.L[:k], "L")
@@ -365,7 +389,7 @@ def test_bad_sample_writes_nothing(tmp_path, recorded):
             write_samples(rec, type("R", (), {**{k: getattr(res, k) for k in ("L", "q", "omega_b", "euler", "torque",
                           "stator_names", "current", "field_rate", "field_phase")}, "t": [math.nan] * 4})(), [3])
         assert rec.counts == counts
-    assert len(decoded(path)) == 6 * 3 + 1
+    assert len(decoded(path)) == 7 * 3 + 1
     assert len(read_bag(path)) == 3
 
 
@@ -415,7 +439,7 @@ def test_signal_mid_run_leaves_a_complete_bag(tmp_path, sig):
     assert_bit_equal(d.L, np.stack([i, 2 * i, -i], axis=1), "L")
     assert np.array_equal(d.t_ns, np.arange(len(d)) * 1_000_000)
     with open(mcap_file(path), "rb") as f:
-        assert make_reader(f).get_summary().statistics.message_count == 6 * len(d) + 1
+        assert make_reader(f).get_summary().statistics.message_count == 7 * len(d) + 1
     assert bag_info(path)["end_reason"].startswith("interrupted: KeyboardInterrupt")
 
 
@@ -442,6 +466,9 @@ def _walk_types(x, path=""):
     if isinstance(x, dict):
         for k, v in x.items():
             yield from _walk_types(v, f"{path}.{k}")
+    elif isinstance(x, list) and x and all(isinstance(v, dict) for v in x):  # a sequence of messages
+        for i, v in enumerate(x):
+            yield from _walk_types(v, f"{path}[{i}]")
     elif isinstance(x, list):
         assert all(type(v) in (float, str) for v in x), path
         yield path, list
@@ -585,10 +612,17 @@ def test_rclpy_messages_serialize_to_the_same_cdr_as_the_bag():
     from sensor_msgs.msg import Imu, JointState
     from geometry_msgs.msg import Vector3Stamped
     from std_msgs.msg import String
+    from diagnostic_msgs.msg import DiagnosticArray
 
     classes = {"sensor_msgs/msg/Imu": Imu, "sensor_msgs/msg/JointState": JointState,
                "geometry_msgs/msg/Vector3Stamped": Vector3Stamped, "std_msgs/msg/String": String,
-               "rosgraph_msgs/msg/Clock": Clock}
+               "rosgraph_msgs/msg/Clock": Clock, "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray}
+    try:  # no tf2_msgs wheel on PyPI: checked where a ROS install provides it
+        from tf2_msgs.msg import TFMessage
+
+        classes["tf2_msgs/msg/TFMessage"] = TFMessage
+    except ImportError:
+        pass
     ts = get_typestore(Stores.ROS2_HUMBLE)
     rng = np.random.default_rng(1)
     q = rng.standard_normal(4)
@@ -598,8 +632,12 @@ def test_rclpy_messages_serialize_to_the_same_cdr_as_the_bag():
     msgs["/gyro/stator_commands"] = gm.command_message(3.0, ["z2"], [0.7], None)
     msgs["/gyro/status"] = gm.status_message("watchdog: stale command → stators off")
     msgs["/gyro/scene"] = gm.scene_message("name: x  # ψ θ φ\n")
+    msgs["/diagnostics"] = gm.diagnostics_message(2.5, "gyro_sim: simulator", "/gyro_simulator", gm.DIAG_WARN,
+                                                  "watchdog fired", {"t": 2.5, "mode": "lockstep"})
     for topic, fields in msgs.items():
         typ = gm.TOPICS[topic]
+        if typ not in classes:
+            continue
         ros_msg = gm.to_ros(classes[typ], fields)
         ours = bytes(ts.serialize_cdr(gm.to_rosbags(ts, typ, fields), typ))
         assert deserialize_message(ours, classes[typ]) == ros_msg, topic
