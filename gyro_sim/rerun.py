@@ -24,7 +24,9 @@ def rerun_bag(path) -> dict:
     if not b.scene_text:
         raise SceneError(f"{path}: the bag holds no scene; it was not written by gyro_sim")
     scene = scene_from_dict(yaml.safe_load(b.scene_text), where=f"{Path(path)} (embedded scene)")
-    runner = Runner(scene, float(b.t[-1]), attitude=True)  # bags are recorded with the attitude
+    period = b.custom.get("gyro_sim.control_period")  # the node's ticks (set for scenes without a controller too)
+    runner = Runner(scene, float(b.t[-1]), attitude=True,  # bags are recorded with the attitude
+                    control_period=float(period) if period else None)
     cmds: dict[int, list] = defaultdict(list)
     for i, t in enumerate(b.command_t):
         cmds[stamp_ns(t)].append(i)

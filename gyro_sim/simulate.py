@@ -515,16 +515,21 @@ class Runner:
     """
 
     def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
-                 attitude: Optional[bool] = None):
+                 attitude: Optional[bool] = None, control_period: Optional[float] = None):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
+        if control_period is not None and not (math.isfinite(control_period) and control_period > 0):
+            raise SceneError(f"control_period = {control_period}: must be a finite number of seconds > 0")
         self.scene, self.T = scene, T
         self.sim = Simulator(scene, attitude)
         t_out = scene.output.sample_times(T)
         ctl = scene.controller
-        self.period = (ctl.period or 1.0 / scene.output.rate) if ctl is not None else None
-        ticks = np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if ctl is not None else np.zeros(0)
+        # ticks: the controller's (its period, else one per output sample); control_period sets them for any
+        # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
+        self.period = control_period or ((ctl.period or 1.0 / scene.output.rate) if ctl is not None else None)
+        ticks = (np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if self.period is not None
+                 else np.zeros(0))
         self._ticks = set(ticks.tolist())
         # every controller tick is an output sample too: the controller (node) sees the published state
         self.t_out = t_out = merge_times(t_out, ticks)  # a tick is exact: a sample within round-off is it

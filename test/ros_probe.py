@@ -7,6 +7,18 @@
     python ros_probe.py bad_commands SECONDS PERIOD                publish malformed stator commands every
                                                                    PERIOD s (0: as fast as it can) until the
                                                                    simulator is done (≤ SECONDS)
+    python ros_probe.py script OUT NS SECONDS STEPS_JSON           in namespace NS, run the steps (service
+                                                                   calls, parameter get/set, waits for status
+                                                                   lines) while recording status, scene,
+                                                                   /diagnostics and /clock; OUT.json
+    python ros_probe.py answer NS SECONDS STATOR T_ON CURRENT      a minimal external controller: answer every
+                                                                   kinetic_moment state with its stamp (empty
+                                                                   command before T_ON, STATOR at CURRENT A from
+                                                                   it) and send one malformed command first
+    python ros_probe.py stamped NS SECONDS PERIOD                  valid commands with wrong stamps (0 and the
+                                                                   wall clock, alternately) every PERIOD s
+
+Topic and service names are relative to the probe's namespace (as the nodes use them); NS '/' is the root.
 """
 import json
 import sys
@@ -15,7 +27,8 @@ import time
 import rclpy
 from rclpy.node import Node
 
-from gyro_sim.messages import TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS
+from gyro_sim.messages import (TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS,
+                               TOPIC_STATUS, TOPICS, node_topic)
 from gyro_sim.ros.common import message_class, qos_profile
 
 
@@ -84,12 +97,172 @@ def bad_commands(seconds: float, period: float) -> None:
     node.destroy_node()
 
 
+# --- scripted checks of the simulator's services, parameters and latched topics ---------------------------
+
+def _python_value(v):
+    """A Python value of an rcl_interfaces ParameterValue."""
+    from rclpy.parameter import parameter_value_to_python
+
+    out = parameter_value_to_python(v)
+    return list(out) if not isinstance(out, (bool, int, float, str, type(None))) else out
+
+
+def _call(node, client, request, timeout=60.0):
+    if not client.wait_for_service(timeout_sec=timeout):
+        raise RuntimeError(f"service {client.srv_name} not available after {timeout} s")
+    fut = client.call_async(request)
+    rclpy.spin_until_future_complete(node, fut, timeout_sec=timeout)
+    if not fut.done():
+        raise RuntimeError(f"service {client.srv_name}: no answer after {timeout} s")
+    return fut.result()
+
+
+def script(out: str, ns: str, seconds: float, steps: list) -> None:
+    """Run ``steps`` against the simulator of namespace ``ns``; write what was seen and answered to ``out``.
+
+    Steps: {"wait_status": TEXT, "count": K} (until K status lines containing TEXT were seen, latched ones
+    included), {"call": "pause"|"resume"|"step"|"reset"}, {"get": [NAMES]}, {"set": {NAME: VALUE}},
+    {"mark": LABEL} (the clock now). Each step's result (with the last /clock seen) is in "results".
+    """
+    from rcl_interfaces.srv import GetParameters, SetParameters
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+
+    node = Node("gyro_script_probe", namespace=ns)
+    seen = {"status": [], "scene": [], "diagnostics": [], "clock": []}
+    deep = _deep
+    node.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
+                             lambda m: seen["status"].append(m.data), deep(TOPIC_STATUS))
+    node.create_subscription(message_class(TOPICS[TOPIC_SCENE]), node_topic(TOPIC_SCENE),
+                             lambda m: seen["scene"].append(m.data), deep(TOPIC_SCENE))
+    node.create_subscription(message_class(TOPICS[TOPIC_CLOCK]), TOPIC_CLOCK,
+                             lambda m: seen["clock"].append(m.clock.sec + m.clock.nanosec * 1e-9), deep(TOPIC_CLOCK))
+    node.create_subscription(message_class(TOPICS[TOPIC_DIAGNOSTICS]), TOPIC_DIAGNOSTICS,
+                             lambda m: seen["diagnostics"].extend(
+                                 [s.level[0] if isinstance(s.level, bytes) else int(s.level), s.name, s.message,
+                                  s.hardware_id, {kv.key: kv.value for kv in s.values}] for s in m.status),
+                             deep(TOPIC_DIAGNOSTICS))
+    sim = (ns.rstrip("/") + "/gyro_simulator") if ns != "/" else "/gyro_simulator"
+    get_c = node.create_client(GetParameters, f"{sim}/get_parameters")
+    set_c = node.create_client(SetParameters, f"{sim}/set_parameters")
+    end = time.time() + seconds
+    results = []
+
+    def spin_until(cond):
+        while not cond():
+            if time.time() > end:
+                raise TimeoutError("probe window over")
+            rclpy.spin_once(node, timeout_sec=0.05)
+
+    try:
+        for step in steps:
+            res = {"step": step}
+            if "wait_status" in step:
+                k = step.get("count", 1)
+                spin_until(lambda: sum(step["wait_status"] in x for x in seen["status"]) >= k)
+            elif "call" in step:
+                r = _call(node, node.create_client(Trigger, f"gyro/{step['call']}"), Trigger.Request())
+                res.update(success=r.success, message=r.message)
+            elif "get" in step:
+                r = _call(node, get_c, GetParameters.Request(names=step["get"]))
+                res["values"] = dict(zip(step["get"], (_python_value(v) for v in r.values)))
+            elif "set" in step:
+                req = SetParameters.Request(parameters=[Parameter(k, value=v).to_parameter_msg()
+                                                        for k, v in step["set"].items()])
+                r = _call(node, set_c, req)
+                res["results"] = [[x.successful, x.reason] for x in r.results]
+            elif "sleep" in step:
+                t1 = time.time() + step["sleep"]
+                spin_until(lambda: time.time() > t1)
+            rclpy.spin_once(node, timeout_sec=0.0)
+            res["clock"] = seen["clock"][-1] if seen["clock"] else None
+            results.append(res)
+    except (TimeoutError, RuntimeError) as e:
+        results.append({"error": str(e)})
+    with open(out, "w") as f:
+        json.dump({"results": results, **seen}, f)
+    node.destroy_node()
+
+
+def _deep(topic):
+    qos = qos_profile(topic)
+    qos.depth = max(qos.depth, 10000)
+    return qos
+
+
+def _done_watch(node, done: list) -> None:
+    node.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
+                             lambda m: done.append(1) if m.data.startswith("done:") else None, _deep(TOPIC_STATUS))
+
+
+def answer(ns: str, seconds: float, stator: str, t_on: float, current: float) -> None:
+    """A minimal external controller (what a user writes): answer every state with its stamp."""
+    node = Node("gyro_answer_probe", namespace=ns)
+    cls = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
+    pub = node.create_publisher(cls, node_topic(TOPIC_STATOR_COMMANDS), qos_profile(TOPIC_STATOR_COMMANDS))
+    done: list = []
+    _done_watch(node, done)
+    first = []
+
+    def on_state(m):
+        if not first:
+            bad = cls()
+            bad.header.stamp = m.header.stamp
+            bad.name, bad.effort = [stator], [-1.0]  # malformed: refused with its reason
+            pub.publish(bad)
+            first.append(1)
+        c = cls()
+        c.header.stamp = m.header.stamp
+        if m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 >= t_on:
+            c.name, c.effort = [stator], [current]
+        pub.publish(c)
+
+    node.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT), on_state,
+                             _deep(TOPIC_KINETIC_MOMENT))
+    end = time.time() + seconds
+    while time.time() < end and not done:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    node.destroy_node()
+
+
+def stamped(ns: str, seconds: float, period: float) -> None:
+    """Valid commands with stamps of no pending tick (0 and the wall clock, alternately) until the run is done."""
+    node = Node("gyro_stamp_probe", namespace=ns)
+    cls = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
+    pub = node.create_publisher(cls, node_topic(TOPIC_STATOR_COMMANDS), qos_profile(TOPIC_STATOR_COMMANDS))
+    done: list = []
+    _done_watch(node, done)
+    end = time.time() + seconds
+    k = 0
+    while time.time() < end and not done:
+        c = cls()
+        if k % 2:
+            now = time.time()
+            c.header.stamp.sec, c.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
+        c.name, c.effort = ["z1"], [0.1]
+        pub.publish(c)
+        k += 1
+        t1 = time.time() + period
+        while time.time() < t1 and not done:
+            rclpy.spin_once(node, timeout_sec=max(t1 - time.time(), 0.0))
+    node.destroy_node()
+
+
 if __name__ == "__main__":
     rclpy.init()
     try:
-        if sys.argv[1] == "listen":
-            listen(sys.argv[2], float(sys.argv[3]), int(sys.argv[4]), sys.argv[5:])
+        cmd, a = sys.argv[1], sys.argv[2:]
+        if cmd == "listen":
+            listen(a[0], float(a[1]), int(a[2]), a[3:])
+        elif cmd == "bad_commands":
+            bad_commands(float(a[0]), float(a[1]))
+        elif cmd == "script":
+            script(a[0], a[1], float(a[2]), json.loads(a[3]))
+        elif cmd == "answer":
+            answer(a[0], float(a[1]), a[2], float(a[3]), float(a[4]))
+        elif cmd == "stamped":
+            stamped(a[0], float(a[1]), float(a[2]))
         else:
-            bad_commands(float(sys.argv[2]), float(sys.argv[3]))
+            raise SystemExit(f"ros_probe: unknown command {cmd!r}")
     finally:
         rclpy.shutdown()

@@ -68,11 +68,12 @@ class Procs:
         self.procs.append(p)
         return p
 
-    def simulator(self, **params):
-        return self.start("-m", "gyro_sim.ros.simulator_node", "--ros-args", *_params(params))
+    def simulator(self, ns=None, **params):
+        """The simulator node with these parameters (``ns``: its namespace, as ``-r __ns:=NS``)."""
+        return self.start("-m", "gyro_sim.ros.simulator_node", "--ros-args", *_ns(ns), *_params(params))
 
-    def controller(self, **params):
-        return self.start("-m", "gyro_ctl.ros.controller_node", "--ros-args", *_params(params))
+    def controller(self, ns=None, **params):
+        return self.start("-m", "gyro_ctl.ros.controller_node", "--ros-args", *_ns(ns), *_params(params))
 
     def close(self):
         for p in self.procs:
@@ -84,6 +85,10 @@ class Procs:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+
+
+def _ns(ns):
+    return ["-r", f"__ns:={ns}"] if ns else []
 
 
 def _params(d):

@@ -18,7 +18,7 @@ from rclpy.node import Node
 from pydantic import ValidationError
 
 from gyro_sim.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, command_message,
-                               to_ros)
+                               node_topic, to_ros)
 from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
 from gyro_sim.scene import SceneError, load_scene
 from gyro_sim.simulate import stator_triad
@@ -71,11 +71,11 @@ class ControllerNode(Node):
         self.axes = np.array([stator_triad(s.axis)[2] for s in st]).reshape(-1, 3)
         self.add_on_set_parameters_callback(self._on_set)
         self.pending: dict[int, dict] = {}
-        self.pub = self.create_publisher(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), TOPIC_STATOR_COMMANDS,
+        self.pub = self.create_publisher(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                          qos_profile(TOPIC_STATOR_COMMANDS))
-        self.create_subscription(message_class(TOPICS[TOPIC_IMU]), TOPIC_IMU, lambda m: self._on(m, "imu"),
+        self.create_subscription(message_class(TOPICS[TOPIC_IMU]), node_topic(TOPIC_IMU), lambda m: self._on(m, "imu"),
                                  qos_profile(TOPIC_IMU))
-        self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), TOPIC_KINETIC_MOMENT,
+        self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT),
                                  lambda m: self._on(m, "L"), qos_profile(TOPIC_KINETIC_MOMENT))
         self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}"
                                + _expected_time_constant(self.scene, cfg))

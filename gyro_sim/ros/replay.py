@@ -15,7 +15,7 @@ import rclpy
 from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 
-from ..messages import QOS, TOPICS
+from ..messages import QOS, TOPICS, node_topic
 from .common import flush_publishers, message_class, qos_profile, stop_on_signals, wait_for_matches
 
 
@@ -30,10 +30,19 @@ def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wai
     node = Node("gyro_replay")
     try:
         with Reader(Path(bag)) as reader:
-            pubs = {}
+            pubs, skipped = {}, []
             for c in reader.connections:
                 qos = qos_profile(c.topic) if c.topic in QOS else 10
-                pubs[c.id] = node.create_publisher(message_class(c.msgtype), c.topic, qos)
+                try:
+                    cls = message_class(c.msgtype)
+                except ImportError:  # e.g. tf2_msgs: no PyPI wheel; a ROS install has it
+                    skipped.append(f"{c.topic} ({c.msgtype})")
+                    continue
+                # the bag's canonical names, relative to this node's namespace (-r __ns:=/unit2 replays one unit)
+                pubs[c.id] = node.create_publisher(cls, node_topic(c.topic), qos)
+            if skipped:
+                node.get_logger().warning("not replayed, their message packages are not importable here: "
+                                          + ", ".join(skipped))
             seen = wait_for_matches(node, pubs.values(), stop, startup_timeout, at_least=wait_for)
             if seen < wait_for:
                 node.get_logger().warning(f"--wait-for-subscribers {wait_for}: {seen} matched after "
@@ -41,7 +50,7 @@ def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wai
             n = 0
             t0_log = None
             wall0 = time.perf_counter()
-            for conn, t_log, raw in reader.messages():
+            for conn, t_log, raw in reader.messages(connections=[c for c in reader.connections if c.id in pubs]):
                 if stop.is_set():
                     break
                 if t0_log is None:

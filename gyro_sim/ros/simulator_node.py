@@ -1,17 +1,26 @@
-"""ROS 2 simulator node: a thin adapter of :class:`gyro_sim.simulate.Runner` to topics, parameters and clocks.
+"""ROS 2 simulator node: a thin adapter of :class:`gyro_sim.simulate.Runner` to topics, parameters, services and
+clocks.
 
-Publishes the topic contract of :mod:`gyro_sim.messages` (``/gyro/...`` and ``/clock``, stamps in
-simulation time) and subscribes to ``/gyro/stator_commands``. Timing modes:
+Publishes the topic contract of :mod:`gyro_sim.messages` (``gyro/...`` relative to the node's namespace,
+``/clock`` and ``/diagnostics``; stamps in simulation time; ``tf``/``tf_static`` where tf2_msgs is importable)
+and subscribes to ``gyro/stator_commands``. Commands are taken at control ticks: the scene controller's period,
+or the ``control_period`` parameter (every scene accepts external commands). Timing modes:
 
-* ``lockstep`` — at each controller tick the node publishes the state and waits for the command
-  stamped with that tick; deterministic, as fast as the machine allows, identical to the in-process run.
+* ``lockstep`` — where a controller is expected (``expect_controller``: by default, where the scene has a
+  controller section), at each tick the node publishes the state and waits for the command stamped with that
+  tick; deterministic, as fast as the machine allows, identical to the in-process run. A command stamped for
+  another instant is refused and reported, and does not feed the watchdog.
 * ``realtime`` — paced to the wall clock × ``rate_factor``; commands apply at the first tick after they
   arrive; the lateness (wall time from publishing a state to receiving its command) is measured.
 * ``freerun`` — as fast as possible; commands apply at the first tick after they arrive.
 
-Watchdog: if a controller is expected and no valid command arrives for ``watchdog_timeout`` wall
-seconds, every stator current is set to zero and a status message says so; it re-arms when commands
-come back. A malformed or out-of-range command is refused whole, with the reason on ``/gyro/status``.
+Services (std_srvs/Trigger, relative to the namespace): ``gyro/pause`` (at the next tick), ``gyro/resume``,
+``gyro/step`` (``step_ticks`` ticks while paused), ``gyro/reset`` (back to the scene's initial state; refused
+while recording: a bag holds one run).
+
+Watchdog: if a controller is expected and no valid command arrives for ``watchdog_timeout`` wall seconds
+(paused time excluded), every stator current is set to zero and a status message says so; it re-arms when
+commands come back. A malformed or out-of-range command is refused whole, with the reason on ``gyro/status``.
 """
 from __future__ import annotations
 
@@ -28,103 +37,194 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from ..messages import (TOPIC_CLOCK, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT,
-                        TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TORQUE, TOPICS, effects_message,
-                        stamp_ns, state_messages, status_message, to_ros)
+from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
+                        TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS,
+                        TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, diagnostics_message, effects_message,
+                        node_topic, scene_message, stamp_ns, state_messages, status_message, to_ros)
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
 from .common import message_class, node_main, parse_command, qos_profile, wait_for_matches
 
 MODES = ("lockstep", "realtime", "freerun")
-STATE_TOPICS = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_CLOCK)
+#: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
+SAMPLE_TOPICS = (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_TF, TOPIC_EFFECTS,
+                 TOPIC_STATORS)
+#: the scene's controller-less tick period (s): external commands are taken at 100 Hz unless control_period says
+DEFAULT_CONTROL_PERIOD = 0.01
+DIAGNOSTICS_PERIOD = 1.0  # wall s between /diagnostics messages
+RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks")
+
+
+def tf_available() -> bool:
+    """Whether tf2_msgs is importable (a ROS install; the PyPI wheels have none): then tf/tf_static go live."""
+    try:
+        import tf2_msgs.msg  # noqa: F401
+        return True
+    except ImportError:
+        return False
+
+
+class RunControl:
+    """Pause / resume / step / reset requests from the service threads to the loop (thread-safe)."""
+
+    def __init__(self, paused: bool):
+        self.lock = threading.Lock()
+        self.paused = paused
+        self.steps_left = 0  # ticks still to run before pausing again
+        self.reset = False
+        self.changed = threading.Event()  # wakes a paused loop
+
+    def request(self, **kw) -> None:
+        with self.lock:
+            for k, v in kw.items():
+                setattr(self, k, v)
+        self.changed.set()
 
 
 class SimulatorNode(Node):
-    """Owns parameters, publishers and the command subscription; the loop is :meth:`run`."""
+    """Owns parameters, publishers, services and the command subscription; the loop is :func:`run_node`."""
 
     def __init__(self):
         super().__init__("gyro_simulator")
         d = self._declare
-        d("scene", "spinup_thin_shell", "scene file path or built-in scene name")
-        d("mode", "lockstep", f"timing mode: {', '.join(MODES)}")
+        d("scene", "spinup_thin_shell", "scene file path or built-in scene name", read_only=True)
+        try:
+            self.scene = load_scene(self.get_parameter("scene").value)
+        except SceneError as e:
+            raise SceneError(f"parameter scene = {self.get_parameter('scene').value!r}: {e}") from None
+        ctl = self.scene.controller
+        period = (ctl.period or 1.0 / self.scene.output.rate) if ctl is not None else DEFAULT_CONTROL_PERIOD
+        d("mode", "lockstep", f"timing mode: {', '.join(MODES)}", read_only=True)
         d("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", (1e-3, 1e4))
-        d("duration", 0.0, "simulated duration in s (0 = the scene's)", (0.0, 1e9))
-        d("record", "", "bag directory to record to (empty = no recording)")
-        d("watchdog_timeout", 2.0, "wall seconds without a command before the currents go to zero (0 = off)",
+        d("duration", 0.0, "simulated duration in s (0 = the scene's)", (0.0, 1e9), read_only=True)
+        d("record", "", "bag directory to record to (empty = no recording)", read_only=True)
+        d("control_period", float(period), "s between control ticks, where commands are taken (default: the "
+          f"scene controller's period; {DEFAULT_CONTROL_PERIOD:g} s for a scene without a controller section)",
+          (1e-6, 3600.0), read_only=True)
+        d("expect_controller", ctl is not None, "a controller is expected (default: the scene has a controller "
+          "section): lockstep waits for its command at each tick, the watchdog watches it", read_only=True)
+        d("watchdog_timeout", 2.0, "wall s without a valid command before the currents go to 0 A (0 = off)",
           (0.0, 3600.0))
-        d("startup_timeout", 30.0, "wall seconds to wait for the first command (lockstep) or for the "
-          "subscribers of wait_for_subscribers (0 = no bound)", (0.0, 3600.0))
+        d("startup_timeout", 30.0, "wall s to wait for the first command (lockstep) or for the subscribers of "
+          "wait_for_subscribers (0 = no bound)", (0.0, 3600.0))
         d("wait_for_subscribers", 0, "before the first step, wait (at most startup_timeout) until this many "
-          "subscriptions are matched to the node's topics, summed over the topics (0 = start at once)", (0, 10000))
+          "subscriptions are matched to the node's topics, summed over the topics (0 = start at once)", (0, 10000),
+          read_only=True)
+        d("start_paused", False, "start paused at t = 0 (after publishing the initial state): gyro/step, "
+          "gyro/resume go on", read_only=True)
+        d("step_ticks", 1, "control ticks one call of gyro/step runs", (1, 1_000_000_000))
         self.add_on_set_parameters_callback(self._on_set)
-        err = self._check(self._params())
-        if err:
-            raise SceneError(err)
+        p = self.params()
+        if p["mode"] not in MODES:
+            raise SceneError(f"parameter mode = {p['mode']!r}: allowed: {', '.join(MODES)}")
+        if p["record"] and Path(p["record"]).exists():
+            raise SceneError(f"parameter record = {p['record']!r}: already exists; give a new directory")
+        self.live = {k: p[k] for k in RUNTIME_PARAMS}
         self.commands: "queue.Queue" = queue.Queue()
-        self.pubs = {t: self.create_publisher(message_class(TOPICS[t]), t, qos_profile(t)) for t in
-                     STATE_TOPICS + (TOPIC_STATUS,)}
-        if self.scene.effects.flywheel is not None or self.scene.effects.damper is not None:
-            self.pubs[TOPIC_EFFECTS] = self.create_publisher(message_class(TOPICS[TOPIC_EFFECTS]), TOPIC_EFFECTS,
-                                                             qos_profile(TOPIC_EFFECTS))
-        self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), TOPIC_STATOR_COMMANDS,
+        self.tf = tf_available()
+        topics = [t for t in SAMPLE_TOPICS if t != TOPIC_TF or self.tf]
+        if self.scene.effects.flywheel is None and self.scene.effects.damper is None:
+            topics.remove(TOPIC_EFFECTS)
+        topics += [TOPIC_STATUS, TOPIC_SCENE, TOPIC_DIAGNOSTICS] + ([TOPIC_TF_STATIC] if self.tf else [])
+        self.pubs = {t: self.create_publisher(message_class(TOPICS[t]), node_topic(t), qos_profile(t)) for t in topics}
+        self.classes = {t: message_class(TOPICS[t]) for t in topics}
+        self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                  self._on_command, qos_profile(TOPIC_STATOR_COMMANDS))
+        self.control = RunControl(p["start_paused"])
+        self.recording = bool(p["record"])
+        from std_srvs.srv import Trigger
+
+        for name, cb in (("pause", self._srv_pause), ("resume", self._srv_resume), ("step", self._srv_step),
+                         ("reset", self._srv_reset)):
+            self.create_service(Trigger, f"gyro/{name}", cb)
+        self.t_now = 0.0  # simulation time, for the service replies (set by the loop)
         self.latencies: list[float] = []
         self.published_wall: dict[int, float] = {}
 
     # --- parameters --------------------------------------------------------------------------
-    def _declare(self, name, default, description, rng=None):
-        desc = ParameterDescriptor(description=description)
-        if isinstance(default, int):
+    def _declare(self, name, default, description, rng=None, read_only=False):
+        desc = ParameterDescriptor(description=description, read_only=read_only)
+        if isinstance(default, int) and not isinstance(default, bool) and rng is not None:
             desc.integer_range = [IntegerRange(from_value=rng[0], to_value=rng[1], step=1)]
         elif rng is not None:
             desc.floating_point_range = [FloatingPointRange(from_value=rng[0], to_value=rng[1], step=0.0)]
         self.declare_parameter(name, default, desc)
 
-    def _params(self) -> dict:
-        return {p: self.get_parameter(p).value for p in ("scene", "mode", "rate_factor", "duration", "record",
-                                                         "watchdog_timeout", "startup_timeout",
-                                                         "wait_for_subscribers")}
-
-    def _check(self, p: dict) -> Optional[str]:
-        if p["mode"] not in MODES:
-            return f"parameter mode = {p['mode']!r}: allowed: {', '.join(MODES)}"
-        try:
-            self.scene = load_scene(p["scene"])
-        except SceneError as e:
-            return f"parameter scene = {p['scene']!r}: {e}"
-        if p["record"] and Path(p["record"]).exists():
-            return f"parameter record = {p['record']!r}: already exists; give a new directory"
-        return None
+    def params(self) -> dict:
+        names = ("scene", "mode", "rate_factor", "duration", "record", "control_period", "expect_controller",
+                 "watchdog_timeout", "startup_timeout", "wait_for_subscribers", "start_paused", "step_ticks")
+        return {n: self.get_parameter(n).value for n in names}
 
     def _on_set(self, params) -> SetParametersResult:
-        # values are fixed for a run: refuse changes with a reason (ranges are checked by rclpy)
-        names = ", ".join(p.name for p in params)
-        return SetParametersResult(successful=False, reason=f"{names}: set at start-up only (restart the node)")
+        # read-only and range checks are rclpy's (with their reasons); the run-time ones take effect at once
+        for prm in params:
+            if prm.name not in RUNTIME_PARAMS:
+                return SetParametersResult(successful=False, reason=f"{prm.name}: set at start-up only")
+        for prm in params:
+            self.live[prm.name] = prm.value
+        return SetParametersResult(successful=True)
+
+    # --- services ----------------------------------------------------------------------------
+    def _srv_pause(self, request, response):
+        c = self.control
+        response.success = not c.paused
+        response.message = (f"already paused at t = {self.t_now:.9g} s" if c.paused
+                            else f"pausing at the next control tick (t = {self.t_now:.9g} s now)")
+        c.request(paused=True, steps_left=0)
+        return response
+
+    def _srv_resume(self, request, response):
+        c = self.control
+        response.success = c.paused
+        response.message = f"resumed at t = {self.t_now:.9g} s" if c.paused else "not paused"
+        c.request(paused=False, steps_left=0)
+        return response
+
+    def _srv_step(self, request, response):
+        c = self.control
+        n = int(self.live["step_ticks"])
+        if not c.paused:
+            response.success, response.message = False, "step: the simulator is running; call gyro/pause first"
+        else:
+            c.request(steps_left=c.steps_left + n)
+            response.success, response.message = True, f"stepping {n} control tick(s) from t = {self.t_now:.9g} s"
+        return response
+
+    def _srv_reset(self, request, response):
+        if self.recording:
+            response.success = False
+            response.message = (f"reset: refused while recording to {self.get_parameter('record').value!r} "
+                                "(a bag holds one run from t = 0)")
+        else:
+            self.control.request(reset=True)
+            response.success, response.message = True, "resetting to the scene's initial state (t = 0)"
+        return response
 
     # --- topics ------------------------------------------------------------------------------
     def _on_command(self, msg) -> None:
         self.commands.put((msg, time.perf_counter()))
+
+    def publish(self, topic: str, fields: dict) -> None:
+        self.pubs[topic].publish(to_ros(self.classes[topic], fields))
 
     def publish_status(self, text: str, warn: bool = False) -> None:
         if warn:  # rclpy ties one severity to each call site
             self.get_logger().warning(text)
         else:
             self.get_logger().info(text)
-        self.pubs[TOPIC_STATUS].publish(to_ros(message_class(TOPICS[TOPIC_STATUS]), status_message(text)))
+        self.publish(TOPIC_STATUS, status_message(text))
 
     def publish_samples(self, s: dict, names: list) -> None:
         now = time.perf_counter()
         for i in range(s["t"].size):
             msgs = state_messages(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i], s["torque"][i],
                                   names, s["current"][i], s["rate"][i], s["phase"][i])
-            # the clock first, then the state; the stator state last (a tick's state is complete after it)
             eff = effects_message(s["t"][i], {k: v[i] for k, v in s["effects"].items()}) if s["effects"] else None
             if eff is not None:
                 msgs[TOPIC_EFFECTS] = eff
-            for topic in (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_EFFECTS,
-                          TOPIC_STATORS):
-                if topic in msgs:
-                    self.pubs[topic].publish(to_ros(message_class(TOPICS[topic]), msgs[topic]))
+            for topic in SAMPLE_TOPICS:
+                if topic in msgs and topic in self.pubs:
+                    self.publish(topic, msgs[topic])
             self.published_wall[stamp_ns(s["t"][i])] = now
 
 
@@ -133,163 +233,340 @@ def last_sample(s: dict) -> dict:
     return {k: ({n: a[-1:] for n, a in v.items()} if isinstance(v, dict) else v[-1:]) for k, v in s.items()}
 
 
-def run_node(node: SimulatorNode, stop: threading.Event) -> int:
-    """The simulation loop (main thread); DDS callbacks run in an executor thread."""
-    p = node._params()
-    scene = node.scene
-    # the node publishes /gyro/imu (orientation) and /gyro/euler: it always integrates the attitude, whatever
-    # the scene's output.attitude says (simulate.integrates_attitude)
-    runner = Runner(scene, p["duration"] or None, attitude=True)
-    names = list(runner.sim.stator_names)
-    expect_commands = scene.controller is not None
-    recorder = None
-    if p["record"]:
-        from ..recording import BagRecorder, scene_text
+class Loop:
+    """The simulation loop of one node (main thread); DDS callbacks and services run in an executor thread."""
 
-        recorder = BagRecorder(p["record"], scene_text(scene), scene.name, extra={"gyro_sim.mode": p["mode"]})
-    mode, factor = p["mode"], p["rate_factor"]
-    wd = p["watchdog_timeout"]
-    last_cmd_wall = time.perf_counter()
-    have_cmd = False
-    watchdog_fired = False
-    latest = None  # latest valid command (names, current, rate, stamp_ns)
-    refused = 0
-    n_ticks = 0
+    def __init__(self, node: SimulatorNode, stop: threading.Event):
+        self.node, self.stop = node, stop
+        self.p = p = node.params()
+        self.mode = p["mode"]
+        self.expect = bool(p["expect_controller"])
+        self.recorder = None
+        if p["record"]:
+            from ..recording import BagRecorder, scene_text, stator_frames
 
-    def status(text, warn=False):
-        node.publish_status(text, warn)
-        if recorder is not None:
-            recorder.write_status(runner.sim.t, text)
+            self.recorder = BagRecorder(p["record"], scene_text(node.scene), node.scene.name,
+                                        extra={"gyro_sim.mode": p["mode"],
+                                               "gyro_sim.control_period": repr(p["control_period"])},
+                                        static_tf=stator_frames(node.scene))
+        self.refused = 0
+        self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
+        self.new_run()
 
-    last_published: dict = {}
-    refusals: dict = {}  # reason -> [wall time of its last report, refusals not reported since]
+    def new_run(self) -> None:
+        """A fresh run of the scene from t = 0 (start, and gyro/reset)."""
+        node = self.node
+        self.runner = Runner(node.scene, self.p["duration"] or None, attitude=True,
+                             control_period=self.p["control_period"])
+        self.names = list(self.runner.sim.stator_names)
+        self.latest = None  # latest valid command (names, current, rate, stamp_ns)
+        self.have_cmd = False
+        self.watchdog_fired = False
+        self.fired_ns = 0
+        self.n_ticks = 0
+        self.last_published: dict = {}
+        # lockstep: answers to the states published since the previous tick (a controller may answer every sample,
+        # and a state published again while waiting gets a second answer) are dropped quietly; after a reset, so
+        # are late answers to the previous run's states. Any other stamp is refused and reported.
+        self.prev_run_ns = getattr(self, "tick_ns", -1)
+        self.prev_tick_ns = self.tick_ns = -1
+        self.waiting_since: Optional[float] = None
+        node.published_wall.clear()
+        while not node.commands.empty():
+            node.commands.get_nowait()
+        self.wall0 = self.last_cmd_wall = self.last_diag = time.perf_counter()
+        self.paused_wall = 0.0  # wall s spent paused (not real time, not watchdog time)
 
-    def report_refusal(why: str, wall: float) -> None:
-        """A refused command on /gyro/status: each reason at most once a second (wall), with the count of
-        the same refusals not reported since (a sender repeating a bad command at 1 kHz must not flood the
-        status topic, the log and this loop)."""
-        last = refusals.setdefault(why, [-math.inf, 0])
+    # --- reporting -------------------------------------------------------------------------------
+    def status(self, text: str, warn: bool = False) -> None:
+        self.node.publish_status(text, warn)
+        if self.recorder is not None:
+            self.recorder.write_status(self.runner.sim.t, text)
+
+    def report_refusal(self, key: str, text: str, wall: float) -> None:
+        """A refused command on gyro/status: each kind (``key``) at most once a wall second, with the count of the
+        same refusals not reported since (a sender repeating a bad command at 1 kHz must not flood the status
+        topic, the log and this loop)."""
+        self.refused += 1
+        last = self.refusals.setdefault(key, [-math.inf, 0])
         if wall - last[0] < 1.0:
             last[1] += 1
             return
         more = f" ({last[1]} more like it since the last report)" if last[1] else ""
-        refusals[why] = [wall, 0]
-        status(f"refused command: {why}{more}", warn=True)
+        self.refusals[key] = [wall, 0]
+        self.status(f"refused command: {text}{more}", warn=True)
 
-    def drain(block_until_ns: Optional[int], timeout: float):
-        """Take commands off the queue; with block_until_ns, wait (≤ timeout) for that stamp.
+    def run_state(self) -> tuple[int, str]:
+        """(diagnostic level, message) of the run now."""
+        t = self.runner.sim.t
+        if self.watchdog_fired:
+            return DIAG_WARN, f"watchdog fired: no valid command for {self.node.live['watchdog_timeout']:g} s"
+        if self.waiting_since is not None and time.perf_counter() - self.waiting_since > 1.0:
+            return DIAG_WARN, (f"waiting {time.perf_counter() - self.waiting_since:.1f} s for the command stamped "
+                               f"{t:.9f} s")
+        if self.runner.done:
+            return DIAG_OK, f"done at t = {t:.9g} s"
+        if self.node.control.paused and self.node.control.steps_left == 0:
+            return DIAG_OK, f"paused at t = {t:.9g} s"
+        return DIAG_OK, "running"
 
-        While waiting, the last state is published again every 0.5 s, so a state lost before
-        discovery completed does not stall the loop (the controller answers a repeat identically).
+    def diagnostics(self, force: bool = False) -> None:
+        """/diagnostics about once a wall second (and at changes): run state, real-time factor, refusals, watchdog."""
+        now = time.perf_counter()
+        if not force and now - self.last_diag < DIAGNOSTICS_PERIOD:
+            return
+        self.last_diag = now
+        level, message = self.run_state()
+        wall = max(now - self.wall0 - self.paused_wall, 1e-9)
+        t = self.runner.sim.t
+        wd = self.node.live["watchdog_timeout"]
+        values = {"t": f"{t:.9g}", "duration": f"{self.runner.T:g}", "mode": self.mode,
+                  "real_time_factor": f"{t / wall:.4g}", "control_ticks": self.n_ticks,
+                  "ticks_per_s": f"{self.n_ticks / wall:.4g}", "commands_refused": self.refused,
+                  "expect_controller": str(self.expect).lower(), "paused": str(self.node.control.paused).lower(),
+                  "watchdog": "off" if not (self.expect and wd > 0) else ("fired" if self.watchdog_fired else "armed")}
+        fields = diagnostics_message(t, f"{self.node.get_fully_qualified_name()}: run",
+                                     self.node.get_fully_qualified_name(), level, message, values)
+        self.node.publish(TOPIC_DIAGNOSTICS, fields)
+        if self.recorder is not None:
+            self.recorder.write_diagnostics(t, fields)
+
+    # --- commands ----------------------------------------------------------------------------
+    def take(self, msg, wall: float, pending: int, strict: bool) -> bool:
+        """Check one command message; keep it as the latest if valid. True when it is stamped ``pending`` (the
+        present tick's stamp, ns).
+
+        ``strict`` (lockstep with a controller expected): the stamp must be the pending tick's, or, after the
+        watchdog fired, that of any state published since (a controller coming back); answers to the states
+        published since the previous tick are dropped quietly (a controller may answer every sample, and a state
+        published again gets a second answer); any other stamp is refused and reported, and feeds no watchdog.
         """
-        nonlocal latest, last_cmd_wall, have_cmd, watchdog_fired, refused
+        cmd, why = parse_command(msg, self.names)
+        if cmd is None:
+            self.report_refusal(why, why, wall)
+            return False
+        ns = cmd[3]
+        if strict and ns != pending and not (self.watchdog_fired and self.published(ns, self.fired_ns)):
+            if not (self.published(ns, self.prev_tick_ns) or self.published(ns, 0, self.prev_run_ns)):
+                self.report_refusal("stamp", f"stamp = {ns * 1e-9:.9f} s: lockstep waits for the command stamped "
+                                    f"{pending * 1e-9:.9f} s (answer each published state with its header stamp)",
+                                    wall)
+            return False
+        self.latest = cmd
+        self.last_cmd_wall = wall
+        self.have_cmd = True
+        published = self.node.published_wall
+        pub = published.pop(ns, None)
+        if pub is not None:
+            self.node.latencies.append(wall - pub)
+        if len(published) > 1000:  # states no one answered (a controller that answers ticks only): bounded
+            for k in sorted(published)[:-100]:
+                del published[k]
+        if self.watchdog_fired:
+            self.watchdog_fired = False
+            self.status("watchdog: commands are back; control resumed")
+        return ns == pending
+
+    def published(self, ns: int, lo: int, hi: Optional[int] = None) -> bool:
+        """Whether ``ns`` is the stamp of an output sample in [lo, hi] (hi: the present time), i.e. of a state
+        this run published there."""
+        if not (lo <= ns <= (stamp_ns(self.runner.sim.t) if hi is None else hi)):
+            return False
+        t_out = self.runner.t_out
+        j = int(np.searchsorted(t_out, ns * 1e-9))
+        return any(stamp_ns(t_out[i]) == ns for i in (j - 1, j, j + 1) if 0 <= i < t_out.size)
+
+    def drain(self, pending: int, strict: bool) -> None:
+        """Take the commands queued now (not those that arrive meanwhile: a flood cannot stall the run)."""
+        q = self.node.commands
+        for _ in range(q.qsize()):
+            try:
+                msg, wall = q.get_nowait()
+            except queue.Empty:
+                return
+            self.take(msg, wall, pending, strict)
+
+    def wait_for(self, stamp: int, timeout: float) -> bool:
+        """Lockstep: wait (≤ timeout wall s) for the command stamped ``stamp``. While waiting, the last state is
+        published again every 0.5 s, so a state lost before discovery completed does not stall the loop (the
+        controller answers a repeat identically)."""
+        q = self.node.commands
         deadline = time.perf_counter() + timeout
         resend = time.perf_counter() + 0.5
-        queued = node.commands.qsize()  # without a wait, only what is queued now: a flood cannot stall the run
-        while True:
-            try:
-                if block_until_ns is None:
-                    if queued <= 0:
-                        return False
-                    queued -= 1
-                    msg, wall = node.commands.get_nowait()
-                else:
-                    left = deadline - time.perf_counter()
-                    if left <= 0 or stop.is_set():
-                        return False
-                    msg, wall = node.commands.get(timeout=min(left, 0.05))
-            except queue.Empty:
-                if block_until_ns is None:
+        self.waiting_since = time.perf_counter()
+        try:
+            while not self.stop.is_set():
+                left = deadline - time.perf_counter()
+                if left <= 0:
                     return False
-                if time.perf_counter() > resend and last_published:
-                    node.publish_samples(last_published["s"], names)
-                    resend = time.perf_counter() + 0.5
-                continue
-            cmd, why = parse_command(msg, names)
-            if cmd is None:
-                refused += 1
-                report_refusal(why, wall)
-                continue
-            latest = cmd
-            last_cmd_wall = wall
-            have_cmd = True
-            pub = node.published_wall.pop(cmd[3], None)
-            if pub is not None:
-                node.latencies.append(wall - pub)
-            if watchdog_fired:
-                watchdog_fired = False
-                status("watchdog: commands are back; control resumed")
-            if block_until_ns is not None and cmd[3] == block_until_ns:
-                return True
+                try:
+                    msg, wall = q.get(timeout=min(left, 0.05))
+                except queue.Empty:
+                    if time.perf_counter() > resend and self.last_published:
+                        self.node.publish_samples(self.last_published["s"], self.names)
+                        resend = time.perf_counter() + 0.5
+                    self.diagnostics()
+                    continue
+                if self.take(msg, wall, stamp, True):
+                    return True
+            return False
+        finally:
+            self.waiting_since = None
 
-    def apply(cmd):
-        nm, cur, rate, stamp = cmd
-        runner.apply_commands({n: (cur[i], rate[i] if rate is not None else None) for i, n in enumerate(nm)})
-        if recorder is not None and nm:
-            recorder.write_command(runner.sim.t, nm, cur, rate)
+    def apply(self, cmd) -> None:
+        nm, cur, rate, _ = cmd
+        self.runner.apply_commands({n: (cur[i], rate[i] if rate is not None else None) for i, n in enumerate(nm)})
+        if self.recorder is not None and nm:
+            self.recorder.write_command(self.runner.sim.t, nm, cur, rate)
 
-    try:
-        want = p["wait_for_subscribers"]
-        if want > 0:
-            node.get_logger().info(f"waiting for {want} subscription(s) to the simulator's topics")
-            seen = wait_for_matches(node, node.pubs.values(), stop, p["startup_timeout"] or math.inf, at_least=want)
-            if seen < want:
-                status(f"wait_for_subscribers = {want}: {seen} matched after {p['startup_timeout']:g} s "
-                       f"(startup_timeout); starting anyway", warn=True)
-        wall0 = last_cmd_wall = time.perf_counter()  # (the watchdog counts from the start of the run)
-        status(f"simulator: scene {scene.name!r}, mode {mode}, duration {runner.T} s"
-               + (f", recording to {p['record']}" if recorder else ""))
-        while not runner.done and not stop.is_set():
-            if runner.row > 0 and runner.is_control_tick:
-                n_ticks += 1
-                if mode == "lockstep" and expect_commands and not watchdog_fired:
-                    timeout = wd if have_cmd else p["startup_timeout"]
-                    if drain(stamp_ns(runner.sim.t), timeout if timeout > 0 else math.inf):
-                        apply(latest)
-                    latest = None  # applied, or stale (another tick's)
-                else:
-                    drain(None, 0.0)
-                    if latest is not None:
-                        apply(latest)
-                        latest = None
-                if expect_commands and wd > 0 and not watchdog_fired and time.perf_counter() - last_cmd_wall > wd:
-                    watchdog_fired = True
-                    apply((names, [0.0] * len(names), None, None))  # recorded like any command (re-run check)
-                    status(f"watchdog: no command for {wd:g} s; all stator currents set to 0 A", warn=True)
-            rows = runner.advance()
-            if stop.is_set() and rows.stop == rows.start:
-                break
-            s = runner.samples(rows)
-            node.publish_samples(s, names)
-            if s["t"].size:
-                last_published["s"] = last_sample(s)
-            if recorder is not None:
-                for i in range(s["t"].size):
-                    recorder.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],
-                                          s["torque"][i], names, s["current"][i], s["rate"][i], s["phase"][i],
-                                          {k: v[i] for k, v in s["effects"].items()})
-            if mode == "realtime":
-                ahead = wall0 + runner.sim.t / factor - time.perf_counter()
-                if ahead > 0:
-                    stop.wait(ahead)
-        wall = time.perf_counter() - wall0
+    def tick(self) -> None:
+        """At a control tick: take (lockstep: wait for) the command, apply it, run the watchdog."""
+        self.n_ticks += 1
+        now = stamp_ns(self.runner.sim.t)
+        self.prev_tick_ns, self.tick_ns = self.tick_ns, now
+        wd = self.node.live["watchdog_timeout"]
+        strict = self.mode == "lockstep" and self.expect
+        if strict and not self.watchdog_fired:
+            timeout = wd if self.have_cmd else self.node.live["startup_timeout"]
+            if self.wait_for(now, timeout if timeout > 0 else math.inf):
+                self.apply(self.latest)
+        else:
+            self.drain(now, strict)
+            if self.latest is not None:
+                self.apply(self.latest)
+        self.latest = None  # applied, or stale (another tick's)
+        if self.expect and wd > 0 and not self.watchdog_fired and time.perf_counter() - self.last_cmd_wall > wd:
+            self.watchdog_fired, self.fired_ns = True, now
+            self.apply((self.names, [0.0] * len(self.names), None, None))  # recorded like any command
+            self.status(f"watchdog: no command for {wd:g} s; all stator currents set to 0 A", warn=True)
+            self.diagnostics(force=True)
+
+    # --- pause, step, reset --------------------------------------------------------------------
+    def hold(self) -> None:
+        """At a tick: stay here while paused (no step pending), serving reset; the paused time counts for neither
+        the real-time pacing nor the watchdog."""
+        c = self.node.control
+        self.node.t_now = self.runner.sim.t
+        announced = False
+        w0 = time.perf_counter()
+        while not self.stop.is_set():
+            with c.lock:
+                if c.reset or not c.paused or c.steps_left > 0:
+                    break
+                c.changed.clear()
+            if not announced:
+                self.status(f"paused at t = {self.runner.sim.t:.9g} s")
+                self.diagnostics(force=True)
+                announced = True
+            c.changed.wait(0.2)
+            self.diagnostics()
+        held = time.perf_counter() - w0
+        self.paused_wall += held
+        self.last_cmd_wall += held
+
+    def publish_samples(self, rows: slice) -> None:
+        s = self.runner.samples(rows)
+        self.node.publish_samples(s, self.names)
+        if s["t"].size:
+            self.last_published["s"] = last_sample(s)
+        if self.recorder is not None:
+            for i in range(s["t"].size):
+                self.recorder.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],
+                                           s["torque"][i], self.names, s["current"][i], s["rate"][i], s["phase"][i],
+                                           {k: v[i] for k, v in s["effects"].items()})
+
+    # --- the run -------------------------------------------------------------------------------------
+    def run(self) -> int:
+        node, p = self.node, self.p
+        try:
+            node.publish(TOPIC_SCENE, scene_message(_scene_text(node.scene)))
+            if node.tf:
+                from ..recording import stator_frames
+
+                node.publish(TOPIC_TF_STATIC, stator_frames(node.scene))
+            want = p["wait_for_subscribers"]
+            if want > 0:
+                node.get_logger().info(f"waiting for {want} subscription(s) to the simulator's topics")
+                seen = wait_for_matches(node, node.pubs.values(), self.stop, p["startup_timeout"] or math.inf,
+                                        at_least=want)
+                if seen < want:
+                    self.status(f"wait_for_subscribers = {want}: {seen} matched after {p['startup_timeout']:g} s "
+                                f"(startup_timeout); starting anyway", warn=True)
+            self.wall0 = self.last_cmd_wall = time.perf_counter()  # (the watchdog counts from the start of the run)
+            r = self.runner
+            self.status(f"simulator: scene {node.scene.name!r}, mode {self.mode}, duration {r.T} s, control ticks "
+                        f"every {r.period:g} s" + (", controller expected" if self.expect else "")
+                        + (f", recording to {p['record']}" if self.recorder else ""))
+            self.diagnostics(force=True)
+            while not self.stop.is_set():
+                node.t_now = self.runner.sim.t
+                self.serve_controls()
+                r = self.runner
+                if r.done or self.stop.is_set():
+                    break
+                if r.row > 0 and r.is_control_tick:
+                    self.tick()
+                    c = node.control
+                    with c.lock:
+                        if c.steps_left > 0:
+                            c.steps_left -= 1
+                rows = r.advance()
+                if self.stop.is_set() and rows.stop == rows.start:
+                    break
+                self.publish_samples(rows)
+                self.diagnostics()
+                if self.mode == "realtime":
+                    ahead = self.wall0 + self.paused_wall + r.sim.t / node.live["rate_factor"] - time.perf_counter()
+                    if ahead > 0:
+                        self.stop.wait(ahead)
+            return self.finish()
+        finally:
+            if self.recorder is not None:
+                self.recorder.close()
+
+    def serve_controls(self) -> None:
+        """Reset if asked; hold at a tick while paused."""
+        c = self.node.control
+        if c.reset:
+            with c.lock:
+                c.reset = False
+            self.new_run()
+            self.status("reset: back to the scene's initial state at t = 0")
+        r = self.runner
+        if r.row > 0 and r.is_control_tick and c.paused and c.steps_left == 0:
+            self.hold()
+            if c.reset:
+                self.serve_controls()
+
+    def finish(self) -> int:
+        r, node = self.runner, self.node
+        wall = max(time.perf_counter() - self.wall0 - self.paused_wall, 1e-9)
         lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
-        if recorder is not None:
-            for k, v in (("wall_time", wall), ("steps", runner.sim.steps), ("duration", runner.sim.t),
-                         ("control_ticks_per_s", n_ticks / wall), ("latency_median_s", float(np.median(lat))),
+        if self.recorder is not None:
+            for k, v in (("wall_time", wall), ("steps", r.sim.steps), ("duration", r.sim.t),
+                         ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
                          ("latency_p99_s", float(np.percentile(lat, 99)))):
-                recorder.set_custom(f"gyro_sim.{k}", v)
-            if stop.is_set():
-                recorder.interrupted("signal")
-        status(f"done: t = {runner.sim.t:g} s in {wall:.3f} s wall ({runner.sim.t / wall:.1f}x real time), "
-               f"{n_ticks} control ticks ({n_ticks / wall:.1f}/s), {runner.sim.steps} steps, "
-               f"{refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
-               f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms"
-               + (" (interrupted)" if stop.is_set() else ""))
-    finally:
-        if recorder is not None:
-            recorder.close()
-    return 0
+                self.recorder.set_custom(f"gyro_sim.{k}", v)
+            if self.stop.is_set():
+                self.recorder.interrupted("signal")
+        self.diagnostics(force=True)
+        self.status(f"done: t = {r.sim.t:g} s in {wall:.3f} s wall ({r.sim.t / wall:.1f}x real time), "
+                    f"{self.n_ticks} control ticks ({self.n_ticks / wall:.1f}/s), {r.sim.steps} steps, "
+                    f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
+                    f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms"
+                    + (" (interrupted)" if self.stop.is_set() else ""))
+        return 0
+
+
+def _scene_text(scene) -> str:
+    from ..recording import scene_text
+
+    return scene_text(scene)
+
+
+def run_node(node: SimulatorNode, stop: threading.Event) -> int:
+    """The simulation loop (main thread); DDS callbacks run in an executor thread."""
+    return Loop(node, stop).run()
 
 
 def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
