@@ -145,6 +145,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="List the built-in scenes with a one-line description of each.",
     )
     scenes.set_defaults(func=_cmd_scenes)
+
+    warm = sub.add_parser(
+        "warmup",
+        help="compile the numba kernels of scenes ahead of their first run",
+        description="Run each scene (default: every built-in one) for a few ms so that every kernel it uses is "
+                    "compiled into numba's on-disk cache (.ci/setup does this once after installing).",
+    )
+    warm.add_argument("scenes", nargs="*", metavar="SCENE", help="built-in names or YAML paths (default: all built-in)")
+    warm.set_defaults(func=_cmd_warmup)
     return parser
 
 
@@ -186,7 +195,8 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
         ("|L|", f"{_num(s('L_norm'), '.6g')} N·m·s"),
         ("kinetic energy", f"{_num(s('energy'), '.6g')} J"),
         ("simulated time", f"{_num(s('t_end'), '.6g')} s"),
-        ("wall time", f"{_num(s('wall_time'), '.3f')} s"),
+        ("wall time", f"{_num(s('wall_time'), '.3f')} s"
+         + (f"  (+ {s('compile_time'):.1f} s compiling the kernels, first use)" if s("compile_time") else "")),
         ("steps", _num(s('steps'), 'd')),
         ("real-time factor", _num(s('realtime_factor'), '.4g')),
     ]
@@ -210,8 +220,11 @@ class _Progress:
         import time
 
         self.time = time
+        from gyro_sim.compile_watch import compile_seconds
+
+        self.compiled = compile_seconds
         self.total, self.enabled = total, enabled
-        self.w0 = time.perf_counter()
+        self.w0, self.c0 = time.perf_counter(), compile_seconds()
         self.last = self.w0
         self.shown = False
 
@@ -221,7 +234,8 @@ class _Progress:
             return
         self.last = now
         t = float(samples["t"][-1])
-        _write(sys.stderr, f"\r  t = {t:.6g} / {self.total:.6g} s  ({t / (now - self.w0):.3g}x real time)   ")
+        wall = max(now - self.w0 - (self.compiled() - self.c0), 1e-9)  # (compile time left out)
+        _write(sys.stderr, f"\r  t = {t:.6g} / {self.total:.6g} s  ({t / wall:.3g}x real time)   ")
         self.shown = True
 
     def close(self) -> None:
@@ -246,6 +260,9 @@ def _cmd_run(args) -> int:
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem
     if args.ros:
         return _run_ros(args, scene, name)
+    from gyro_sim.compile_watch import announce_compiles
+
+    announce_compiles()  # one line where numba compiles (a first use), before the long pause it explains
     progress = _Progress(args.duration or scene.duration, not args.quiet and sys.stderr.isatty())
     try:
         # a bag's /gyro/imu and /gyro/euler need the attitude: a recorded run integrates it whatever the
@@ -490,6 +507,23 @@ def _cmd_scenes(args) -> int:
             status = EXIT_USAGE
         _write(sys.stdout, f"{name:<{width}}  {line}\n".rstrip() + "\n")
     return status
+
+
+def _cmd_warmup(args) -> int:
+    import time
+
+    from gyro_sim import scene as scene_mod
+    from gyro_sim.warmup import warm
+
+    w0 = time.perf_counter()
+    try:
+        c = warm(args.scenes or None, say=lambda text: _write(sys.stdout, text + "\n"))
+    except scene_mod.SceneError as exc:
+        return _error(str(exc))
+    _write(sys.stdout, f"warmup: kernels compiled in {c:.1f} s ({time.perf_counter() - w0:.1f} s wall)"
+           if c > 0 else "warmup: every kernel was already compiled (numba's cache is warm)")
+    _write(sys.stdout, "\n")
+    return EXIT_OK
 
 
 def main(argv=None) -> int:

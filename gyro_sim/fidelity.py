@@ -46,6 +46,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .averaged_m import AveragedM, averaged_m_model
+from .compile_watch import compile_seconds
 from .slow_k import ENTER_MARGIN, MU_MAX, SlowK, slow_k_of
 from .slow_k import slow_state as slow_k_state
 from .frames import attitude_from_euler, nutation_angle, quat_to_matrix
@@ -238,7 +239,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
     switched = set(ctl.params.control_stators) if ctl is not None and ctl.law == "psi_switching" else set()
     strict = scene.fidelity == "averaged"
-    w0 = time.perf_counter()
+    w0, c0 = time.perf_counter(), compile_seconds()
     cmd_times = sorted({c.time for c in scene.commands if c.time < r.T})
     segments = []  # (t0, t1) of averaged stretches
     models = []  # the averaged model of each stretch: "spin-up", "[M]", "[K]"
@@ -275,7 +276,8 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
             until = float(r.t_out[r.row]) if r.row < r.t_out.size else None
         r.advance(until=until)
     res = r.result()
-    res.wall_time = time.perf_counter() - w0
+    res.compile_time = compile_seconds() - c0
+    res.wall_time = time.perf_counter() - w0 - res.compile_time
     res.averaged_segments = segments  # RunResult.euler: ψ, φ NaN there (averaged out)
     res.averaged_models = models
     res.averaged_rhs_evaluations = nfev

@@ -450,7 +450,7 @@ def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
 
 @njit(cache=True)
 def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes,
-                     out_y, out_N, k_out, eff, case=False):
+                     out_y, out_N, k_out, eff, case=None):
     """Integrate y from t0 through each time in ``t_stops`` with frozen-flow steps no longer than ``h_max``
     (equal steps between stops), recording like :func:`gyro_sim.kernels.integrate`. ``lam_modes`` (N,)
     = 1/τ_n; ``case``: isotropic rotor without attitude, modes in the case frame
@@ -478,7 +478,7 @@ def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, J
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
             for j in range(k):
-                if case:
+                if case is not None:
                     frozen_flow_step_case(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, lam_modes, w, c_m, tail, nm,
                                           A, X, Z, EZ, EO, S, E_end, out)
                 else:

@@ -783,7 +783,7 @@ def lawson_case_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols, 
 
 @njit(cache=True)
 def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
-              out_y, out_N, k_out, eff, A, b, c, case=False):
+              out_y, out_N, k_out, eff, A, b, c, case=None):
     """Integrate y from t0 through each time in ``t_stops`` (increasing).
 
     The step is :func:`lawson_lie_step` with the tableau (A, b, c), or :func:`etd_lie_step` (ETDRK4)
@@ -837,7 +837,7 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
                 stage_trig_table(om, c_trig, h, tab)
                 h_last = h
             for j in range(k):
-                if case:
+                if case is not None:
                     if lawson:
                         lawson_case_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols,
                                          count, E0, W, WB, Eh, Fs, Ys, work, tab, tw)
@@ -860,12 +860,14 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
 
 
 @njit(cache=True)
-def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k, case=False):
+def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k, case=None):
     """Output sample k: the state y and the torque (case, N·m) at phase time s (scratch: cs, sn (P,), F (n,),
-    work (25,)); ``case``: the state has no attitude (:func:`nonlinear_part_case`)."""
-    out_y[k, :] = y
+    work (25,)); ``case`` (None or True; None prunes the case-frame code): the state has no attitude
+    (:func:`nonlinear_part_case`)."""
+    for i in range(y.shape[0]):  # (a loop: a slice assignment compiles numba's shape-error formatting, ~2 s)
+        out_y[k, i] = y[i]
     phasor_trig(s, om, cs, sn)
-    if case:
+    if case is not None:
         nonlinear_part_case(cs, sn, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work)
     else:
         nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff)

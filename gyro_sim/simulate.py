@@ -19,6 +19,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from . import effects, frozen_flow, kernels
+from .compile_watch import CompileClock
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
@@ -61,6 +62,12 @@ def integrates_attitude(scene: Scene, attitude: Optional[bool] = None) -> bool:
                 and (ctl is None or ctl.law in LAWS_WITHOUT_ATTITUDE))
 
 
+def _case_flag(attitude: bool) -> tuple:
+    """The trailing ``case`` argument of the compiled integrators and :func:`kernels.record_sample`: None with
+    the attitude (numba prunes the case-frame code: it compiles only what the scene runs), True without."""
+    return (None,) if attitude else (True,)
+
+
 def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u."""
     u = np.asarray(u, dtype=float)
@@ -93,7 +100,8 @@ class RunResult:
     field_rate: np.ndarray  # (n,k) rad/s (signed)
     field_phase: np.ndarray  # (n,k) rad
     modes: np.ndarray  # (n,3N) eddy-mode states e_n, body frame (case frame without attitude), T
-    wall_time: float = 0.0
+    wall_time: float = 0.0  # s, the run's wall time less its numba compile time
+    compile_time: float = 0.0  # s of numba compilation during the run (a first use; gyro_sim.compile_watch)
     steps: int = 0
     commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
     averaged_segments: list = field(default_factory=list)  # (t0, t1) s run with the averaged model
@@ -145,6 +153,7 @@ class RunResult:
             "energy": float(self.energy[-1]),
             "t_end": t_end,
             "wall_time": self.wall_time,
+            "compile_time": self.compile_time,
             "steps": int(self.steps),
             "realtime_factor": t_end / self.wall_time if self.wall_time > 0 else float("inf"),
             "attitude": self.attitude,
@@ -401,7 +410,7 @@ class Simulator:
             k_out, steps = frozen_flow.integrate_frozen(
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
                 self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
-                not self.attitude)
+                *_case_flag(self.attitude))
         elif free:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
@@ -409,7 +418,7 @@ class Simulator:
         else:
             k_out, steps = kernels.integrate(
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method], not self.attitude)
+                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method], *_case_flag(self.attitude))
         self.steps += steps
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
@@ -447,9 +456,11 @@ class Simulator:
                                         self.c_m, self.w, self.tail, self.tau.size, F, np.zeros(25))
             return F[0:3].copy()
         self.eff[effects.T0] = self.t
-        kernels.nonlinear_part(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail,
-                               self.tau.size, F, np.zeros(25), self.eff)
-        return F[0:3].copy()
+        out_N = np.zeros((1, 3))  # (record_sample: the steppers' own torque, compiled once for both)
+        kernels.record_sample(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail, self.tau.size,
+                              self.eff, np.empty(om.size), np.empty(om.size), F, np.zeros(25),
+                              np.empty((1, self.y.size)), out_N, 0, None)
+        return out_N[0].copy()
 
     def effect_outputs(self, t: np.ndarray, Y: np.ndarray) -> dict:
         """Outputs of the effects that are on, for states ``Y`` (rows) at times ``t`` (s), SI:
@@ -554,7 +565,8 @@ class Runner:
         self.command_log: list = []  # every command applied: (t, names, currents|None, rates|None)
         self._bi = 0  # index of the next break to reach
         self._ci = 0
-        self.wall_time = 0.0
+        self.wall_time = 0.0  # s in advance(), numba compile time left out (compile_time)
+        self.compile_time = 0.0
 
     # --- the loop, one break at a time ---------------------------------------------------------
     @property
@@ -624,9 +636,10 @@ class Runner:
         sim = self.sim
         t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
         rows = slice(row, row + sel.size)
-        w0 = time.perf_counter()
-        self.row = sim.advance(tb, sel, self.out_y, self.out_N, row)
-        self.wall_time += time.perf_counter() - w0
+        with CompileClock() as clock:
+            self.row = sim.advance(tb, sel, self.out_y, self.out_N, row)
+        self.wall_time += clock.wall
+        self.compile_time += clock.compile
         self.cur[rows] = c0
         self.rate[rows] = r0
         self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
@@ -715,6 +728,7 @@ class Runner:
                          torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
                          current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
                          modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
+                         compile_time=self.compile_time,
                          steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
                          attitude=self.sim.attitude)
 
@@ -739,12 +753,13 @@ def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitud
     # samples are breaks where a caller acts on them, and where switching events are looked for between
     # breaks (the node does the same: the same events, the same bits)
     r = Runner(scene, duration, sample_breaks=on_samples is not None or switching is not None, attitude=attitude)
-    w0 = time.perf_counter()
-    while not r.done:
-        if r.row > 0 and law is not None and r.is_control_tick:
-            r.apply_commands(law(r.control_input()))
-        rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
-        if on_samples is not None and rows.stop > rows.start:
-            on_samples(r.samples(rows))
-    r.wall_time = time.perf_counter() - w0
+    clock = CompileClock()
+    with clock:
+        while not r.done:
+            if r.row > 0 and law is not None and r.is_control_tick:
+                r.apply_commands(law(r.control_input()))
+            rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
+            if on_samples is not None and rows.stop > rows.start:
+                on_samples(r.samples(rows))
+    r.wall_time, r.compile_time = clock.wall, clock.compile
     return r.result()

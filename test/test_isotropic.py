@@ -13,7 +13,7 @@ from gyro_sim import frozen_flow, load_scene, run
 from gyro_sim.plotting import plot_run
 from gyro_sim.recording import record_result
 from gyro_sim.scene import SceneError
-from gyro_sim.simulate import Runner, Simulator
+from gyro_sim.simulate import _case_flag, Runner, Simulator
 
 J = 5.592e-6  # kg·m², the default shell's transverse moment, all three equal here
 
@@ -161,7 +161,7 @@ def test_ros_node_runner_keeps_the_attitude():
     from gyro_sim import rerun
     assert "attitude=True" in inspect.getsource(rerun.rerun_bag)
     node = (Path(rerun.__file__).parent / "ros" / "simulator_node.py").read_text()
-    assert "Runner(scene, p[\"duration\"] or None, attitude=True)" in node
+    assert "Runner(node.scene, self.p[\"duration\"] or None, attitude=True," in node
 
 
 def test_bad_attitude_value_is_refused():
@@ -186,7 +186,7 @@ def test_no_attitude_work_makes_the_step_cheaper():
             y = sim.y.copy()
             return frozen_flow.integrate_frozen(y, 0.0, t_seg, stops, rec, h, Bre, Bim, om, sim.Jinv, J, J, 2,
                                                 sim.c_m, sim.w, sim.tail, 1.0 / sim.tau, oy, oN, 0, sim.eff,
-                                                not sim.attitude)
+                                                *_case_flag(sim.attitude))
 
         go()
         best = math.inf

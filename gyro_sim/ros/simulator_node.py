@@ -41,6 +41,7 @@ from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPI
                         TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS,
                         TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, diagnostics_message, effects_message,
                         node_topic, scene_message, stamp_ns, state_messages, status_message, to_ros)
+from ..compile_watch import announce_compiles, compile_seconds
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
 from .common import message_class, node_main, parse_command, qos_profile, wait_for_matches
@@ -276,6 +277,11 @@ class Loop:
             node.commands.get_nowait()
         self.wall0 = self.last_cmd_wall = self.last_diag = time.perf_counter()
         self.paused_wall = 0.0  # wall s spent paused (not real time, not watchdog time)
+        self.c0 = self.c_seen = compile_seconds()  # numba compile time: left out of the same
+
+    def run_wall(self) -> float:
+        """Wall s of the run so far, less the time paused and the time numba spent compiling (a first use)."""
+        return max(time.perf_counter() - self.wall0 - self.paused_wall - (compile_seconds() - self.c0), 1e-9)
 
     # --- reporting -------------------------------------------------------------------------------
     def status(self, text: str, warn: bool = False) -> None:
@@ -317,7 +323,7 @@ class Loop:
             return
         self.last_diag = now
         level, message = self.run_state()
-        wall = max(now - self.wall0 - self.paused_wall, 1e-9)
+        wall = self.run_wall()
         t = self.runner.sim.t
         wd = self.node.live["watchdog_timeout"]
         values = {"t": f"{t:.9g}", "duration": f"{self.runner.T:g}", "mode": self.mode,
@@ -435,6 +441,10 @@ class Loop:
             if self.latest is not None:
                 self.apply(self.latest)
         self.latest = None  # applied, or stale (another tick's)
+        compiled = compile_seconds() - self.c_seen  # compiling is no controller's silence
+        if compiled:
+            self.c_seen += compiled
+            self.last_cmd_wall += compiled
         if self.expect and wd > 0 and not self.watchdog_fired and time.perf_counter() - self.last_cmd_wall > wd:
             self.watchdog_fired, self.fired_ns = True, now
             self.apply((self.names, [0.0] * len(self.names), None, None))  # recorded like any command
@@ -493,6 +503,8 @@ class Loop:
                     self.status(f"wait_for_subscribers = {want}: {seen} matched after {p['startup_timeout']:g} s "
                                 f"(startup_timeout); starting anyway", warn=True)
             self.wall0 = self.last_cmd_wall = time.perf_counter()  # (the watchdog counts from the start of the run)
+            self.c0 = self.c_seen = compile_seconds()
+            announce_compiles(say=lambda text: self.status(text))
             r = self.runner
             self.status(f"simulator: scene {node.scene.name!r}, mode {self.mode}, duration {r.T} s, control ticks "
                         f"every {r.period:g} s" + (", controller expected" if self.expect else "")
@@ -516,7 +528,7 @@ class Loop:
                 self.publish_samples(rows)
                 self.diagnostics()
                 if self.mode == "realtime":
-                    ahead = self.wall0 + self.paused_wall + r.sim.t / node.live["rate_factor"] - time.perf_counter()
+                    ahead = r.sim.t / node.live["rate_factor"] - self.run_wall()
                     if ahead > 0:
                         self.stop.wait(ahead)
             return self.finish()
@@ -540,10 +552,11 @@ class Loop:
 
     def finish(self) -> int:
         r, node = self.runner, self.node
-        wall = max(time.perf_counter() - self.wall0 - self.paused_wall, 1e-9)
+        wall = self.run_wall()
+        compiled = compile_seconds() - self.c0
         lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
         if self.recorder is not None:
-            for k, v in (("wall_time", wall), ("steps", r.sim.steps), ("duration", r.sim.t),
+            for k, v in (("wall_time", wall), ("compile_time", compiled), ("steps", r.sim.steps), ("duration", r.sim.t),
                          ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
                          ("latency_p99_s", float(np.percentile(lat, 99)))):
                 self.recorder.set_custom(f"gyro_sim.{k}", v)
@@ -554,6 +567,7 @@ class Loop:
                     f"{self.n_ticks} control ticks ({self.n_ticks / wall:.1f}/s), {r.sim.steps} steps, "
                     f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
                     f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms"
+                    + (f" (+ {compiled:.1f} s compiling the kernels, first use)" if compiled else "")
                     + (" (interrupted)" if self.stop.is_set() else ""))
         return 0
 

@@ -1,0 +1,88 @@
+"""Where numba compiles: one line saying so, and its time kept out of a run's real-time factor.
+
+The compiled kernels are cached on disk (``cache=True``: next to the modules, or numba's user cache where the
+package directory is read-only, or ``NUMBA_CACHE_DIR``), so a scene's kernels compile once per install and
+Python version. When they do compile, the user sees one line (:func:`announce_compiles`) and
+:class:`~gyro_sim.simulate.Runner` counts the time apart (``compile_time``), so the real-time factor of a first
+run is that of the integration alone.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from typing import Callable, Optional, TextIO
+
+__all__ = ["compile_seconds", "announce_compiles", "CompileClock"]
+
+_lock = threading.Lock()
+_state = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None}
+
+
+def _install() -> None:
+    """Register the process-wide numba compile listener (once)."""
+    with _lock:
+        if _state["installed"]:
+            return
+        from numba.core import event
+
+        class _Listener(event.Listener):
+            def on_start(self, ev):
+                if _state["depth"] == 0:
+                    _state["t0"] = time.perf_counter()
+                    say = _state["announce"]
+                    if say is not None:
+                        _state["announce"] = None  # once a process
+                        say()
+                _state["depth"] += 1
+
+            def on_end(self, ev):
+                _state["depth"] -= 1
+                if _state["depth"] == 0:
+                    _state["total"] += time.perf_counter() - _state["t0"]
+
+        event.register("numba:compile", _Listener())
+        _state["installed"] = True
+
+
+def compile_seconds() -> float:
+    """Wall seconds this process has spent compiling numba functions so far (outermost compiles only; counted
+    from the first call of this module's functions)."""
+    _install()
+    return _state["total"]
+
+
+def announce_compiles(stream: Optional[TextIO] = None, say: Optional[Callable[[str], None]] = None) -> None:
+    """At the first numba compile of this process, print one line saying what is happening (to ``stream``,
+    default stderr, or through ``say``)."""
+    text = ("gyro_sim: compiling the numba kernels this scene needs (first use with this install; cached on disk "
+            "for later runs); the real-time factor leaves this time out")
+
+    def emit():
+        if say is not None:
+            say(text)
+        else:
+            print(text, file=stream or sys.stderr, flush=True)
+
+    _install()
+    _state["announce"] = emit
+
+
+class CompileClock:
+    """Wall time of a block less the numba compile time inside it: ``with clock: ...``; ``clock.wall`` and
+    ``clock.compile`` accumulate over uses."""
+
+    def __init__(self):
+        _install()
+        self.wall = 0.0
+        self.compile = 0.0
+
+    def __enter__(self) -> "CompileClock":
+        self._w0, self._c0 = time.perf_counter(), _state["total"]
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        c = _state["total"] - self._c0
+        self.compile += c
+        self.wall += time.perf_counter() - self._w0 - c
+        return False

@@ -1,0 +1,68 @@
+"""Compilation of the numba kernels: only what a scene uses, once, cached wherever the cache lives, announced.
+
+No timing is asserted (the machine is shared): what is checked is which kernels compile, how many times, and
+what the user is told.
+"""
+import json
+import os
+import re
+import subprocess
+import sys
+
+
+
+SIGNATURES = """
+import json, gyro_sim
+from gyro_sim import frozen_flow, kernels
+gyro_sim.run(gyro_sim.load_scene("spinup_thin_shell"), duration=0.2)
+gyro_sim.run(gyro_sim.load_scene("spinup_thin_shell"), duration=0.2, attitude=True)
+print(json.dumps({f.__name__: [str(s[-1]) for s in f.signatures]
+                  for f in (kernels.record_sample, frozen_flow.integrate_frozen)}))
+"""
+
+
+def test_default_scene_compiles_each_kernel_once_and_no_case_frame_code():
+    """The default scene (frozen-flow steps with the attitude) uses one signature of each kernel (the sample at
+    t = 0 and the stepper's samples share record_sample), and the case-frame step of attitude-free runs is
+    pruned (case = None), not compiled: before, record_sample compiled twice and frozen_flow_step_case compiled
+    unused. In a process of its own: the suite's other tests compile other signatures."""
+    out = subprocess.run([sys.executable, "-c", SIGNATURES], capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    sigs = json.loads(out.stdout.splitlines()[-1])
+    print(f"\n  the last argument (case) of each signature compiled: {sigs}")
+    assert sigs == {"record_sample": ["none"], "integrate_frozen": ["none"]}
+
+
+def _run_cli(args, cache_dir):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+    return subprocess.run([sys.executable, "-m", "gyro_sim.cli", *args], env=env, capture_output=True, text=True,
+                          timeout=900)
+
+
+def test_first_run_announces_its_compile_and_a_second_process_loads_the_cache(tmp_path):
+    """With an empty cache (here numba's NUMBA_CACHE_DIR, as for a read-only install) the first run prints one
+    line saying it compiles, and its summary gives the compile time apart from the run's wall time (the real-time
+    factor leaves it out); a second process finds the cache and compiles nothing."""
+    cache = tmp_path / "numba_cache"
+    args = ["run", "spinup_thin_shell", "--duration", "1", "--out", str(tmp_path), "--quiet"]
+    first = _run_cli(args, cache)
+    assert first.returncode == 0, first.stderr
+    notices = [line for line in first.stderr.splitlines() if "compiling the numba kernels" in line]
+    m = re.search(r"wall time\s+([\d.]+) s  \(\+ ([\d.]+) s compiling", first.stdout)
+    assert len(notices) == 1 and m, (first.stdout, first.stderr)
+    second = _run_cli(args, cache)
+    assert second.returncode == 0, second.stderr
+    print(f"\n  first run: {m.group(0)}; second process: "
+          f"{[x for x in second.stdout.splitlines() if x.startswith('wall time')]}")
+    assert "compiling" not in second.stderr and "compiling" not in second.stdout
+    assert any(p.suffix == ".nbc" for p in cache.rglob("*"))
+
+
+def test_warmup_compiles_a_scene_and_then_reports_a_warm_cache(tmp_path):
+    cache = tmp_path / "numba_cache"
+    first = _run_cli(["warmup", "free_rotor"], cache)
+    assert first.returncode == 0 and "warmup: free_rotor: compiled in" in first.stdout, first.stdout + first.stderr
+    second = _run_cli(["warmup", "free_rotor"], cache)
+    assert "already compiled" in second.stdout, second.stdout
+    bad = _run_cli(["warmup", "no_such_scene"], cache)
+    assert bad.returncode == 2 and bad.stderr.startswith("error:") and len(bad.stderr.splitlines()) == 1
