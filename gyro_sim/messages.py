@@ -57,6 +57,7 @@ convert.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping as _AbcMapping
 from typing import Any, Mapping, Optional, Sequence
 
 __all__ = [
@@ -364,15 +365,30 @@ def to_ros(msg_class: type, fields: Mapping[str, Any]) -> Any:
     return msg
 
 
+_OCTETS: dict[type, frozenset] = {}  # message class → its octet fields (rclpy takes those as 1 byte)
+
+
+def _octets(cls: type) -> frozenset:
+    hit = _OCTETS.get(cls)
+    if hit is None:
+        types = getattr(cls, "get_fields_and_field_types", dict)()
+        hit = _OCTETS[cls] = frozenset(k for k, v in types.items() if v == "octet")
+    return hit
+
+
+def _is_mapping(value: Any) -> bool:
+    return type(value) is dict or isinstance(value, _AbcMapping)  # (dict first: the per-sample path)
+
+
 def _fill_ros(obj: Any, fields: Mapping[str, Any]) -> None:
     for key, value in fields.items():
         if not hasattr(obj, key):
             raise ValueError(f"{type(obj).__name__} has no field {key!r}")
-        if isinstance(value, Mapping):
+        if _is_mapping(value):
             _fill_ros(getattr(obj, key), value)
-        elif isinstance(value, int) and getattr(obj, "get_fields_and_field_types", dict)().get(key) == "octet":
-            setattr(obj, key, bytes([value]))  # rclpy takes an octet as 1 byte (an int would serialize wrongly)
-        elif isinstance(value, (list, tuple)) and value and isinstance(value[0], Mapping):
+        elif type(value) is int and key in _octets(type(obj)):
+            setattr(obj, key, bytes([value]))  # an int there would serialize wrongly
+        elif type(value) in (list, tuple) and value and _is_mapping(value[0]):
             cls = _ros_element_class(obj, key)
             setattr(obj, key, [to_ros(cls, v) for v in value])
         else:

@@ -53,6 +53,7 @@ SAMPLE_TOPICS = (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPI
 #: the scene's controller-less tick period (s): external commands are taken at 100 Hz unless control_period says
 DEFAULT_CONTROL_PERIOD = 0.01
 DIAGNOSTICS_PERIOD = 1.0  # wall s between /diagnostics messages
+SUBSCRIBERS_REFRESH = 0.25  # wall s between looks at who subscribes to the per-sample topics
 RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks")
 
 
@@ -129,6 +130,7 @@ class SimulatorNode(Node):
         topics += [TOPIC_STATUS, TOPIC_SCENE, TOPIC_DIAGNOSTICS] + ([TOPIC_TF_STATIC] if self.tf else [])
         self.pubs = {t: self.create_publisher(message_class(TOPICS[t]), node_topic(t), qos_profile(t)) for t in topics}
         self.classes = {t: message_class(TOPICS[t]) for t in topics}
+        self._subs, self._subs_next = (), 0.0
         self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                  self._on_command, qos_profile(TOPIC_STATOR_COMMANDS))
         self.control = RunControl(p["start_paused"])
@@ -215,17 +217,27 @@ class SimulatorNode(Node):
             self.get_logger().info(text)
         self.publish(TOPIC_STATUS, status_message(text))
 
+    def subscribed(self) -> tuple:
+        """The per-sample topics someone subscribes to, in publishing order (counts refreshed every
+        :data:`SUBSCRIBERS_REFRESH` wall s: publishing a topic no one reads is most of a lockstep tick's cost)."""
+        now = time.perf_counter()
+        if now >= self._subs_next:
+            self._subs = tuple(t for t in SAMPLE_TOPICS if t in self.pubs and self.pubs[t].get_subscription_count())
+            self._subs_next = now + SUBSCRIBERS_REFRESH
+        return self._subs
+
     def publish_samples(self, s: dict, names: list) -> None:
         now = time.perf_counter()
+        topics = self.subscribed()
         for i in range(s["t"].size):
-            msgs = state_messages(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i], s["torque"][i],
-                                  names, s["current"][i], s["rate"][i], s["phase"][i])
-            eff = effects_message(s["t"][i], {k: v[i] for k, v in s["effects"].items()}) if s["effects"] else None
-            if eff is not None:
-                msgs[TOPIC_EFFECTS] = eff
-            for topic in SAMPLE_TOPICS:
-                if topic in msgs and topic in self.pubs:
-                    self.publish(topic, msgs[topic])
+            if topics:
+                msgs = state_messages(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],
+                                      s["torque"][i], names, s["current"][i], s["rate"][i], s["phase"][i])
+                if s["effects"] and TOPIC_EFFECTS in topics:
+                    msgs[TOPIC_EFFECTS] = effects_message(s["t"][i], {k: v[i] for k, v in s["effects"].items()})
+                for topic in topics:
+                    if msgs.get(topic) is not None:
+                        self.publish(topic, msgs[topic])
             self.published_wall[stamp_ns(s["t"][i])] = now
 
 
@@ -585,6 +597,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
 
 def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
     """DDS callbacks in an executor thread, the simulation loop in this one."""
+    # (not the EventsExecutor: its spin holds the GIL while it waits, which stops this loop)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     spin = threading.Thread(target=executor.spin, daemon=True)
