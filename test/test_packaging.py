@@ -1,0 +1,86 @@
+"""Packaging and ROS conventions: colcon builds (plain and --symlink-install), the manifests and the
+dependencies they declare, the ament index of an editable install (``gyro-sim ros-index``), the nodes'
+``--help``, the launch file, the parameter files under a namespace, the CLI without rclpy.
+
+ros2cli and launch are not installable from PyPI: ``ros2 run`` is checked the way it resolves an
+executable (ament_index_python), the launch file against stub ``launch``/``launch_ros`` modules.
+"""
+import ast
+import importlib.util
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import types
+from importlib.metadata import distribution
+from pathlib import Path
+
+import pytest
+import yaml
+from packaging.requirements import Requirement
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+COPY_IGNORE = shutil.ignore_patterns(".git", ".venv", "build", "install", "log", "runs", "__pycache__", "*.egg-info",
+                                     ".hypothesis", ".pytest_cache", ".benchmarks", "*.nbi", "*.nbc")
+# what setup.py's data_files install (checked in a colcon install and in a ros-index prefix)
+INDEX = "share/ament_index/resource_index/packages/"
+DATA_FILES = [INDEX + "gyro_sim", INDEX + "gyro_ctl",
+              "share/gyro_sim/package.xml", "share/gyro_ctl/package.xml", "share/gyro_sim/launch/gyro_sim.launch.py",
+              "share/gyro_sim/config/simulator.params.yaml", "share/gyro_sim/config/controller.params.yaml",
+              "lib/gyro_sim/simulator", "lib/gyro_ctl/controller"]
+ROS_MISSING = "needs the ROS 2 Python packages (rclpy): pip install 'gyro_sim[ros]' (or source a ROS 2 install)"
+
+
+def run(cmd, timeout=120, **kw):
+    """Run ``cmd``; its CompletedProcess (text output)."""
+    return subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=timeout, **kw)
+
+
+def manifest(path):
+    from catkin_pkg.package import parse_package
+
+    return parse_package(str(path))
+
+
+def names(deps) -> set:
+    return {d.name for d in deps}
+
+
+# --- the nodes' --help ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("module", ["gyro_sim.ros.simulator_node", "gyro_ctl.ros.controller_node"])
+def test_node_help_exits_without_running(module):
+    pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
+    from test_ros import unique_domain
+
+    for flag in ("--help", "-h"):
+        # a node that ran would wait for its peer (or simulate 60 s): the bound is generous, not a timing check
+        r = run([sys.executable, "-m", module, flag], timeout=60,
+                env=dict(os.environ, ROS_DOMAIN_ID=str(unique_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.startswith("usage:") and "--ros-args" in r.stdout, r.stdout
+
+
+def test_node_main_help_prints_the_usage_and_never_starts_rclpy(monkeypatch, capsys):
+    rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
+    from gyro_sim.ros.common import node_main, node_usage
+
+    class Started(Exception):
+        pass
+
+    def fail(*a, **k):
+        raise Started
+
+    monkeypatch.setattr(rclpy, "init", fail)
+    usage = node_usage("ros2 run gyro_sim simulator", [("scene", "spinup_thin_shell", "scene name or path"),
+                                                       ("rate_factor", 1.0, "simulated s per wall s", (1e-3, 1e4))])
+    assert node_main("simulator", fail, fail, ["simulator", "-p", "--help"], usage=usage) == 0
+    out = capsys.readouterr().out
+    assert out == usage and out.startswith("usage: ros2 run gyro_sim simulator")
+    assert re.search(r"^  scene +'spinup_thin_shell' +scene name or path$", out, re.M)
+    assert re.search(r"^  rate_factor +1\.0 +simulated s per wall s$", out, re.M)
+    with pytest.raises(Started):  # after --ros-args, --help is ROS's (rcl's) argument
+        node_main("simulator", fail, fail, ["simulator", "--ros-args", "--help"], usage=usage)
