@@ -201,6 +201,22 @@ def _error(message: str) -> int:
     return EXIT_USAGE
 
 
+def _ros_missing(what: str) -> bool:
+    """True (after one ``error:`` line) if rclpy cannot be found: ``what`` needs the ROS 2 Python packages.
+
+    Checked in this process before anything starts: the node processes would each end in a traceback."""
+    import importlib.util
+
+    try:
+        found = importlib.util.find_spec("rclpy") is not None
+    except (ImportError, ValueError):  # a parent package missing, or a module without a spec
+        found = False
+    if not found:
+        _error(f"{what} needs the ROS 2 Python packages (rclpy): pip install 'gyro_sim[ros]' "
+               "(or source a ROS 2 install)")
+    return not found
+
+
 # --- commands ---------------------------------------------------------------
 
 class _Progress:
@@ -230,6 +246,8 @@ class _Progress:
 
 
 def _cmd_run(args) -> int:
+    if args.ros and _ros_missing("gyro-sim run --ros"):
+        return EXIT_USAGE
     # Imported here so that --help works fast and without the numerical stack.
     from gyro_sim import plotting
     from gyro_sim import scene as scene_mod
@@ -368,6 +386,8 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_replay(args) -> int:
+    if not args.check and _ros_missing("gyro-sim replay (without --check)"):
+        return EXIT_USAGE
     if not (math.isfinite(args.rate) and args.rate > 0):
         return _error(f"--rate {args.rate}: must be a positive number")
     if args.wait_for_subscribers < 0:

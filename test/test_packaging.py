@@ -84,3 +84,20 @@ def test_node_main_help_prints_the_usage_and_never_starts_rclpy(monkeypatch, cap
     assert re.search(r"^  rate_factor +1\.0 +simulated s per wall s$", out, re.M)
     with pytest.raises(Started):  # after --ros-args, --help is ROS's (rcl's) argument
         node_main("simulator", fail, fail, ["simulator", "--ros-args", "--help"], usage=usage)
+
+
+# --- the CLI without rclpy ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("argv,what", [(["run", "free_rotor", "--ros"], "gyro-sim run --ros"),
+                                       (["replay", "BAG"], "gyro-sim replay (without --check)")])
+def test_cli_without_rclpy(tmp_path, argv, what):
+    # rclpy cannot be imported in this process nor in any it starts (a sitecustomize on PYTHONPATH)
+    (tmp_path / "site").mkdir()
+    (tmp_path / "site/sitecustomize.py").write_text("import sys\nsys.modules['rclpy'] = None\n")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path / "site"), ROS_DOMAIN_ID="0",
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    argv = [a.replace("BAG", str(tmp_path / "bag")) for a in argv] + (["--out", str(tmp_path / "out")]
+                                                                        if argv[0] == "run" else [])
+    r = run([sys.executable, "-m", "gyro_sim.cli", *argv], timeout=300, cwd=tmp_path, env=env)
+    assert (r.returncode, r.stderr.splitlines()) == (2, [f"error: {what} {ROS_MISSING}"]), r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]  # nothing was run or written
