@@ -101,3 +101,43 @@ def test_cli_without_rclpy(tmp_path, argv, what):
     r = run([sys.executable, "-m", "gyro_sim.cli", *argv], timeout=300, cwd=tmp_path, env=env)
     assert (r.returncode, r.stderr.splitlines()) == (2, [f"error: {what} {ROS_MISSING}"]), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]  # nothing was run or written
+# --- parameter files under a namespace ------------------------------------------------------------
+
+NODES_WITH_PARAMS = """
+import json, sys
+import rclpy
+from gyro_ctl.ros.controller_node import ControllerNode
+from gyro_sim.ros.simulator_node import SimulatorNode
+ns, files = sys.argv[1], sys.argv[2:]
+args = ["nodes", "--ros-args", *(a for f in files for a in ("--params-file", f))] + (["-r", "__ns:=" + ns] * bool(ns))
+rclpy.init(args=args)
+sim, ctl = SimulatorNode(), ControllerNode()
+print(json.dumps({"ns": [sim.get_namespace(), ctl.get_namespace()],
+                  "gyro_simulator": {k: sim.get_parameter(k).value for k in ("scene", "mode", "watchdog_timeout")},
+                  "gyro_controller": {k: ctl.get_parameter(k).value for k in ("scene", "law", "control_current")}}))
+sim.destroy_node(); ctl.destroy_node(); rclpy.shutdown()
+"""
+
+
+def params_file(node: str) -> dict:
+    """The ros__parameters of ``node`` in config/<sim|ctl>.params.yaml, whatever its node-name key."""
+    f = ROOT / "config" / {"gyro_simulator": "simulator.params.yaml", "gyro_controller": "controller.params.yaml"}[node]
+    (key, value), = yaml.safe_load(f.read_text()).items()
+    assert key.split("/")[-1] == node, key
+    return value["ros__parameters"]
+
+
+@pytest.mark.parametrize("ns", ["", "/sim1", "/a/b"])
+def test_params_files_apply_under_a_namespace(ns):
+    pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
+    from test_ros import unique_domain
+
+    r = run([sys.executable, "-c", NODES_WITH_PARAMS, ns, ROOT / "config/simulator.params.yaml",
+             ROOT / "config/controller.params.yaml"], timeout=180,
+            env=dict(os.environ, ROS_DOMAIN_ID=str(unique_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout.splitlines()[-1])
+    assert got["ns"] == [ns or "/"] * 2
+    for node in ("gyro_simulator", "gyro_controller"):
+        want = params_file(node)
+        assert got[node] == {k: want[k] for k in got[node]}, (node, got[node])
