@@ -36,6 +36,7 @@ setup(
         ('share/gyro_ctl', ['package.xml']),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     python_requires='>=3.10',
     install_requires=[

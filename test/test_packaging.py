@@ -141,3 +141,82 @@ def test_params_files_apply_under_a_namespace(ns):
     for node in ("gyro_simulator", "gyro_controller"):
         want = params_file(node)
         assert got[node] == {k: want[k] for k in got[node]}, (node, got[node])
+
+
+# --- the launch file ------------------------------------------------------------------------------
+
+class Stub:
+    """A launch or launch_ros class: keeps its arguments; equal to a stub of the same class and arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+    def __eq__(self, other):
+        return type(self) is type(other) and (self.args, self.kwargs) == (other.args, other.kwargs)
+
+    __hash__ = None
+
+    def __repr__(self):
+        return f"{type(self).__name__}{self.args}{self.kwargs}"
+
+
+def stub_module(name: str) -> types.ModuleType:
+    """A module whose every attribute is a Stub subclass of that name (made once)."""
+    mod = types.ModuleType(name)
+    made = {}
+
+    def getattr_(attr):
+        if attr.startswith("__"):
+            raise AttributeError(attr)
+        return made.setdefault(attr, type(attr, (Stub,), {}))
+
+    mod.__getattr__ = getattr_
+    mod.__path__ = []  # a package: its submodules import
+    return mod
+
+
+@pytest.fixture
+def launch_stubs(monkeypatch):
+    mods = {n: stub_module(n) for n in ("launch", "launch.actions", "launch.conditions", "launch.substitutions",
+                                        "launch_ros", "launch_ros.actions", "launch_ros.parameter_descriptions",
+                                        "launch_ros.substitutions")}
+    for n, m in mods.items():
+        monkeypatch.setitem(sys.modules, n, m)
+    return types.SimpleNamespace(**{n.replace(".", "_"): m for n, m in mods.items()})
+
+
+def test_launch_file(launch_stubs):
+    s = launch_stubs
+    spec = importlib.util.spec_from_file_location("gyro_sim_launch", ROOT / "launch/gyro_sim.launch.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ld = mod.generate_launch_description()
+    assert type(ld) is s.launch.LaunchDescription
+    entities = list(ld.args[0])
+    LC, Node = s.launch_substitutions.LaunchConfiguration, s.launch_ros_actions.Node
+
+    args = {e.args[0]: e.kwargs["default_value"] for e in entities if type(e) is s.launch_actions.DeclareLaunchArgument}
+    sim = params_file("gyro_simulator")
+    assert args == {"scene": sim["scene"], "mode": sim["mode"], "namespace": "", "use_controller": "true",
+                    "record": ""}
+
+    # DDS on localhost unless the environment sets the range, before any node starts
+    env = s.launch_actions.SetEnvironmentVariable(
+        "ROS_AUTOMATIC_DISCOVERY_RANGE",
+        s.launch_substitutions.EnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE", default_value="LOCALHOST"))
+    nodes = [e for e in entities if type(e) is Node]
+    assert env in entities and entities.index(env) < entities.index(nodes[0])
+
+    assert [(n.kwargs["package"], n.kwargs["executable"], n.kwargs["name"]) for n in nodes] == \
+        [("gyro_sim", "simulator", "gyro_simulator"), ("gyro_ctl", "controller", "gyro_controller")]
+    string = s.launch_ros_parameter_descriptions.ParameterValue
+    for node, file, overrides in ((nodes[0], "simulator.params.yaml", ("scene", "mode", "record")),
+                                  (nodes[1], "controller.params.yaml", ("scene",))):
+        assert node.kwargs["namespace"] == LC("namespace")
+        params_path, values = node.kwargs["parameters"]
+        assert params_path == s.launch_substitutions.PathJoinSubstitution(
+            [s.launch_ros_substitutions.FindPackageShare("gyro_sim"), "config", file])
+        assert (ROOT / "config" / file).is_file()
+        assert values == {k: string(LC(k), value_type=str) for k in overrides}
+    assert "condition" not in nodes[0].kwargs
+    assert nodes[1].kwargs["condition"] == s.launch_conditions.IfCondition(LC("use_controller"))
