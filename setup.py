@@ -15,7 +15,8 @@ import os
 from setuptools import find_packages, setup
 
 package_name = 'gyro_sim'
-here = os.path.abspath(os.path.dirname(__file__))
+# realpath: colcon build --symlink-install runs a symlink to this file from the build folder
+here = os.path.dirname(os.path.realpath(__file__))
 
 
 def _read(name):
@@ -68,6 +69,11 @@ setup(
             'hypothesis>=6',
             'mpmath>=1.3',  # 50-digit reference values of [M] (2.13) in test_conductor
             'mcap-ros2-support>=0.5',  # independent reader of recorded bags in test_recording
+            # `colcon build` of this package in test_packaging (colcon-ros: ament_python packages)
+            'colcon-core>=0.21',
+            'colcon-ros>=0.5',
+            'colcon-python-setup-py>=0.2.9',
+            'colcon-package-information>=0.4',  # `colcon list`
         ],
         # `gyro-sim sweep` (gyro_sim/sweep.py): runs on a Dask cluster (local or by scheduler
         # address), results as Parquet, progress bar. The core imports none of these.

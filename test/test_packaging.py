@@ -220,3 +220,73 @@ def test_launch_file(launch_stubs):
         assert values == {k: string(LC(k), value_type=str) for k in overrides}
     assert "condition" not in nodes[0].kwargs
     assert nodes[1].kwargs["condition"] == s.launch_conditions.IfCondition(LC("use_controller"))
+
+
+# --- colcon build ---------------------------------------------------------------------------------
+
+def colcon_env(ws: Path) -> dict:
+    """No user colcon defaults, no ament prefixes of the caller; the venv's Python first on PATH."""
+    env = {k: v for k, v in os.environ.items() if k not in ("AMENT_PREFIX_PATH", "COLCON_PREFIX_PATH", "PYTHONPATH")}
+    return dict(env, COLCON_HOME=str(ws / "colcon_home"), PATH=f"{BIN}{os.pathsep}{env.get('PATH', '')}")
+
+
+@pytest.fixture(scope="module", params=["plain", "symlink"])
+def colcon_ws(request, tmp_path_factory):
+    """A workspace ws/src/gyro_sim (a copy of the repo) built by the venv's colcon."""
+    pytest.importorskip("colcon_ros", reason="colcon is in the 'test' extra (pip install '.[test]')")
+    ws = tmp_path_factory.mktemp(f"ws_{request.param}")
+    shutil.copytree(ROOT, ws / "src" / "gyro_sim", ignore=COPY_IGNORE, symlinks=True)
+    cmd = [BIN / "colcon", "--log-base", ws / "log", "build", "--base-paths", ws / "src", "--build-base", ws / "build",
+           "--install-base", ws / "install"] + (["--symlink-install"] if request.param == "symlink" else [])
+    r = run(cmd, timeout=600, cwd=ws, env=colcon_env(ws))
+    assert r.returncode == 0, f"colcon build failed:\n{r.stdout}\n{r.stderr}"
+    return types.SimpleNamespace(ws=ws, mode=request.param, src=ws / "src" / "gyro_sim",
+                                 prefix=ws / "install" / "gyro_sim")
+
+
+def sourced(ws, *cmd, timeout=120):
+    """``cmd`` in a shell that sourced the workspace's install/local_setup.sh (as a user does)."""
+    script = '. "$1/local_setup.sh" && shift && exec "$@"'
+    return run(["sh", "-c", script, "sh", ws.ws / "install", *cmd], timeout=timeout, cwd=ws.ws, env=colcon_env(ws.ws))
+
+
+def test_colcon_finds_gyro_sim_only(colcon_ws):
+    # resource/gyro_ctl_manifest/package.xml is gyro_ctl's manifest, not a package colcon should build
+    if colcon_ws.mode != "plain":
+        pytest.skip("one check is enough")
+    r = run([BIN / "colcon", "--log-base", os.devnull, "list", "--base-paths", colcon_ws.ws / "src"],
+            env=colcon_env(colcon_ws.ws))
+    assert r.returncode == 0, r.stderr
+    assert [line.split()[0] for line in r.stdout.splitlines()] == ["gyro_sim"], r.stdout
+
+
+def test_colcon_install_tree(colcon_ws):
+    p = colcon_ws.prefix
+    missing = [f for f in DATA_FILES if not (p / f).is_file()]
+    assert not missing, f"not installed by colcon build ({colcon_ws.mode}): {missing}"
+    assert sorted(f.name for f in (p / "share/gyro_sim/config").glob("*.yaml")) == \
+        sorted(f.name for f in (ROOT / "config").glob("*.yaml"))
+    assert manifest(p / "share/gyro_sim/package.xml").name == "gyro_sim"
+    if colcon_ws.mode == "symlink":
+        assert (p / "share/gyro_sim/config/free_rotor.yaml").resolve() == (colcon_ws.src / "config/free_rotor.yaml")
+
+
+def test_colcon_installed_package_imports(colcon_ws):
+    r = sourced(colcon_ws, "python", "-c", "import json, gyro_sim, gyro_ctl.laws; "
+                "print(json.dumps([gyro_sim.__file__, gyro_ctl.laws.__file__]))")
+    assert r.returncode == 0, r.stderr
+    files = [Path(f) for f in json.loads(r.stdout)]
+    if colcon_ws.mode == "symlink":  # the build folder links the sources: edits are live
+        assert all(f.resolve().is_relative_to(colcon_ws.src) for f in files), files
+    else:
+        site = next((colcon_ws.prefix / "lib").glob("python3*/site-packages"))
+        assert all(f.is_relative_to(site) and not f.is_symlink() for f in files), files
+
+
+def test_colcon_executables_run(colcon_ws):
+    # `ros2 run gyro_sim gyro-sim ...`, `ros2 run gyro_sim simulator`, `ros2 run gyro_ctl controller`
+    lib = colcon_ws.prefix / "lib"
+    for exe, expect in ((lib / "gyro_sim/gyro-sim", "usage: gyro-sim"), (lib / "gyro_sim/simulator", "usage:"),
+                        (lib / "gyro_ctl/controller", "usage:")):
+        r = sourced(colcon_ws, exe, "--help")
+        assert r.returncode == 0 and r.stdout.startswith(expect), (exe, r.stdout, r.stderr)
