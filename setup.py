@@ -31,10 +31,10 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name, 'resource/gyro_ctl']),
         # `ros2 run gyro_sim simulator` and `ros2 run gyro_ctl controller` (gyro_ctl is indexed as a
-        # package of its own, sharing this package.xml)
+        # package of its own, with its own manifest)
         ('lib/' + package_name, ['scripts/simulator']),
         ('lib/gyro_ctl', ['scripts/controller']),
-        ('share/gyro_ctl', ['package.xml']),
+        ('share/gyro_ctl', ['resource/gyro_ctl_manifest/package.xml']),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),

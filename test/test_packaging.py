@@ -267,6 +267,7 @@ def test_colcon_install_tree(colcon_ws):
     assert sorted(f.name for f in (p / "share/gyro_sim/config").glob("*.yaml")) == \
         sorted(f.name for f in (ROOT / "config").glob("*.yaml"))
     assert manifest(p / "share/gyro_sim/package.xml").name == "gyro_sim"
+    assert manifest(p / "share/gyro_ctl/package.xml").name == "gyro_ctl"  # `ros2 pkg xml gyro_ctl`
     if colcon_ws.mode == "symlink":
         assert (p / "share/gyro_sim/config/free_rotor.yaml").resolve() == (colcon_ws.src / "config/free_rotor.yaml")
 
@@ -290,3 +291,117 @@ def test_colcon_executables_run(colcon_ws):
                         (lib / "gyro_ctl/controller", "usage:")):
         r = sourced(colcon_ws, exe, "--help")
         assert r.returncode == 0 and r.stdout.startswith(expect), (exe, r.stdout, r.stderr)
+
+
+# --- the manifests ----------------------------------------------------------------------------------
+
+#: top-level module imported by the code → rosdep key (None: no key in rosdistro; the manifest says so)
+MODULE_KEYS = {
+    "rclpy": "rclpy", "rcl_interfaces": "rcl_interfaces", "ament_index_python": "ament_index_python",
+    "std_msgs": "std_msgs", "geometry_msgs": "geometry_msgs", "sensor_msgs": "sensor_msgs",
+    "rosgraph_msgs": "rosgraph_msgs", "builtin_interfaces": "builtin_interfaces",
+    "diagnostic_msgs": "diagnostic_msgs", "std_srvs": "std_srvs", "tf2_msgs": "tf2_msgs",
+    "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "numba": "python3-numba",
+    "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
+    "mcap": None, "tqdm": "python3-tqdm", "dask": None, "distributed": None, "pyarrow": None,
+    "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
+}
+#: pip requirement of setup.py → rosdep key (ros-* wheels: the ROS package of that name)
+PIP_KEYS = {
+    "numpy": "python3-numpy", "scipy": "python3-scipy", "pyyaml": "python3-yaml", "numba": "python3-numba",
+    "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
+    "mcap": None, "pytest": "python3-pytest", "hypothesis": "python3-hypothesis", "mpmath": None,
+    "mcap-ros2-support": "mcap-ros2-support", "dask": None, "pyarrow": None, "tqdm": "python3-tqdm",
+}
+#: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
+#: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed
+NOT_A_DEPENDENCY = {"rmw_fastrtps_cpp"}
+
+
+def imported_modules(folder: str) -> set:
+    """Third-party top-level modules imported anywhere in ``folder`` of the repo (stdlib and this
+    distribution's gyro_sim, gyro_ctl excluded)."""
+    out = set()
+    for path in (ROOT / folder).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                out |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                out.add(node.module.split(".")[0])
+    return out - set(sys.stdlib_module_names) - {"gyro_sim", "gyro_ctl", "__future__"}
+
+
+def message_packages() -> set:
+    """Packages of the message types the nodes load by name (``gyro_sim.messages.TOPICS``)."""
+    from gyro_sim.messages import TOPICS
+
+    return {t.split("/")[0] for t in TOPICS.values()}
+
+
+def says_no_key(xml: Path, pip: str) -> bool:
+    """A comment of the manifest names the pip package ``pip`` and says it has no rosdep key."""
+    comments = re.findall(r"<!--(.*?)-->", xml.read_text(encoding="utf-8"), re.S)
+    return any(re.search(rf"(?<![\w-]){re.escape(pip)}(?![\w-])", c) and "no rosdep key" in c for c in comments)
+
+
+def check_declared(xml: Path, modules, deps: set) -> list:
+    """The modules whose key ``deps`` lacks (or, without a key, that no comment of ``xml`` names)."""
+    bad = []
+    for m in sorted(modules):
+        assert m in MODULE_KEYS, f"{m}: imported by the code; add its rosdep key to {xml.name} and MODULE_KEYS"
+        key = MODULE_KEYS[m]
+        if (key is None and not says_no_key(xml, {"distributed": "dask"}.get(m, m))) \
+                or (key is not None and key not in deps):
+            bad.append((m, key))
+    return bad
+
+
+def test_manifest_declares_every_import():
+    pkg = manifest(ROOT / "package.xml")
+    pkg.validate()
+    modules = imported_modules("gyro_sim") | imported_modules("gyro_ctl") | imported_modules("launch")
+    assert not check_declared(ROOT / "package.xml", modules | message_packages(), names(pkg.exec_depends))
+
+
+def setup_requirements() -> dict:
+    """setup.py's install_requires and extras_require, read from its source: {'': [...], extra: [...]}."""
+    call = next(n for n in ast.walk(ast.parse((ROOT / "setup.py").read_text())) if isinstance(n, ast.Call)
+                and getattr(n.func, "id", "") == "setup")
+    kw = {k.arg: k.value for k in call.keywords}
+    return {"": ast.literal_eval(kw["install_requires"]), **ast.literal_eval(kw["extras_require"])}
+
+
+def rosdep_key(requirement: str):
+    name = Requirement(requirement).name.lower()
+    if name.startswith("ros-"):
+        return name[4:].replace("-", "_")
+    assert name in PIP_KEYS, f"{name}: a requirement of setup.py; add its rosdep key to package.xml and PIP_KEYS"
+    return PIP_KEYS[name]
+
+
+def test_manifest_declares_setup_requirements():
+    pkg = manifest(ROOT / "package.xml")
+    req = setup_requirements()
+    run_deps, test_deps = names(pkg.exec_depends), names(pkg.test_depends)
+    for extra, deps in (("", run_deps), ("ros", run_deps), ("sweep", run_deps), ("test", test_deps)):
+        for r in req[extra]:
+            if extra == "test" and Requirement(r).name.startswith("colcon-"):
+                continue  # the build tool, not a dependency
+            key = rosdep_key(r)
+            if key in NOT_A_DEPENDENCY:
+                continue
+            if key is None:
+                assert says_no_key(ROOT / "package.xml", Requirement(r).name), f"{r}: no rosdep key, not said"
+            else:
+                assert key in deps, f"setup.py {extra or 'install_requires'} {r!r}: {key} not in package.xml"
+
+
+def test_gyro_ctl_manifest():
+    ctl, sim = manifest(ROOT / "resource/gyro_ctl_manifest/package.xml"), manifest(ROOT / "package.xml")
+    ctl.validate()
+    import gyro_sim
+
+    assert (ctl.name, sim.name) == ("gyro_ctl", "gyro_sim")
+    assert ctl.version == sim.version == gyro_sim.__version__ == distribution("gyro_sim").version
+    modules = imported_modules("gyro_ctl") | {"gyro_sim", "sensor_msgs", "geometry_msgs"}  # its topics' types
+    assert not check_declared(ROOT / "resource/gyro_ctl_manifest/package.xml", modules, names(ctl.exec_depends))
