@@ -5,9 +5,11 @@ Works two ways:
     optional ``ros`` extra: ``pip install '.[ros]'``);
   * ``colcon build`` in a ROS 2 workspace, where ``package.xml`` names the ROS deps.
 
-The data_files put the ament index marker, package.xml and config/*.yaml under
-``<prefix>/share`` so ``ros2 run gyro_sim ...`` and ``get_package_share_directory``
-work with either tool.
+The data_files put the ament index markers, the manifests, config/*.yaml and the launch file
+under ``<prefix>/share`` and the ``ros2 run`` executables under ``<prefix>/lib`` so ``ros2 run
+gyro_sim ...``, ``ros2 launch gyro_sim gyro_sim.launch.py`` and ``get_package_share_directory``
+work with either tool (with ``pip install -e``, ``gyro-sim ros-index`` lays them out:
+gyro_sim/ros/index.py).
 """
 from glob import glob
 import os

@@ -405,3 +405,73 @@ def test_gyro_ctl_manifest():
     assert ctl.version == sim.version == gyro_sim.__version__ == distribution("gyro_sim").version
     modules = imported_modules("gyro_ctl") | {"gyro_sim", "sensor_msgs", "geometry_msgs"}  # its topics' types
     assert not check_declared(ROOT / "resource/gyro_ctl_manifest/package.xml", modules, names(ctl.exec_depends))
+
+
+# --- the ament index of an editable install (gyro-sim ros-index) -------------------------------------
+
+def ament(prefix: Path, code: str, **kw):
+    env = {k: v for k, v in os.environ.items() if k != "AMENT_PREFIX_PATH"}
+    return run([sys.executable, "-c", code], env=dict(env, AMENT_PREFIX_PATH=str(prefix)), **kw)
+
+
+def check_ament_prefix(prefix: Path):
+    """``ros2 run``'s lookups resolve gyro_sim and gyro_ctl to ``prefix``; the executables answer --help."""
+    r = ament(prefix, "import json; from ament_index_python.packages import get_package_prefix as p, "
+                      "get_package_share_directory as s; "
+                      "print(json.dumps([p('gyro_sim'), p('gyro_ctl'), s('gyro_sim'), s('gyro_ctl')]))")
+    assert r.returncode == 0, r.stderr
+    assert [Path(x) for x in json.loads(r.stdout)] == [prefix, prefix, prefix / "share/gyro_sim",
+                                                       prefix / "share/gyro_ctl"]
+    assert manifest(prefix / "share/gyro_ctl/package.xml").name == "gyro_ctl"
+    for exe in ("lib/gyro_sim/simulator", "lib/gyro_ctl/controller"):
+        # whatever PATH says: the executables name their interpreter
+        r = run([prefix / exe, "--help"], timeout=60, env=dict(os.environ, PATH="/usr/bin:/bin"))
+        assert r.returncode == 0 and r.stdout.startswith("usage:"), (exe, r.stdout, r.stderr)
+
+
+def test_ros_index_cli(tmp_path):
+    prefix = tmp_path / "prefix"
+    r = run([sys.executable, "-m", "gyro_sim.cli", "ros-index", prefix])
+    assert r.returncode == 0, r.stderr
+    tree = sorted(p.relative_to(prefix) for p in prefix.rglob("*"))
+    assert run([sys.executable, "-m", "gyro_sim.cli", "ros-index", prefix]).returncode == 0  # idempotent
+    assert sorted(p.relative_to(prefix) for p in prefix.rglob("*")) == tree
+    assert all((prefix / f).is_file() for f in DATA_FILES)
+    check_ament_prefix(prefix)
+
+
+def test_ros_index_is_what_colcon_installs(colcon_ws, tmp_path):
+    """The same files as setup.py's data_files (colcon's install less its own files and the console scripts)."""
+    from gyro_sim.ros.index import install_index
+
+    if colcon_ws.mode != "plain":
+        pytest.skip("one comparison is enough")
+    p = colcon_ws.prefix
+    scripts = {f"lib/gyro_sim/{e.name}" for e in distribution("gyro_sim").entry_points if e.group == "console_scripts"}
+    colcon_own = re.compile(r"lib/python3[^/]*/|share/colcon-core/"
+                            r"|share/gyro_sim/(hook/|package\.(dsv|sh|bash|zsh|ps1)$)")
+    installed = {f.relative_to(p).as_posix() for f in p.rglob("*") if f.is_file()}
+    data_files = {f for f in installed if not colcon_own.match(f)} - scripts
+    install_index(tmp_path, colcon_ws.src)
+    assert {f.relative_to(tmp_path).as_posix() for f in tmp_path.rglob("*") if f.is_file()} == data_files
+
+
+def test_ros_index_removes_stale_links(tmp_path):
+    from gyro_sim.ros.index import install_index
+
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=COPY_IGNORE, symlinks=True)
+    install_index(tmp_path / "prefix", src)
+    old = tmp_path / "prefix/share/gyro_sim/config/free_rotor.yaml"
+    assert old.resolve() == src / "config/free_rotor.yaml"
+    (src / "config/free_rotor.yaml").unlink()
+    assert old in install_index(tmp_path / "prefix", src)
+    assert not old.is_symlink() and (tmp_path / "prefix/share/gyro_sim/config/three_stators.yaml").is_file()
+
+
+def test_setup_venv_has_the_ament_index():
+    """.ci/setup lays the index out in .venv: AMENT_PREFIX_PATH=$PWD/.venv ros2 run gyro_sim simulator."""
+    prefix = Path(sys.prefix)
+    if not (prefix / ".setup-stamp").is_file():
+        pytest.skip("not the .venv made by .ci/setup")
+    check_ament_prefix(prefix)
