@@ -250,10 +250,9 @@ def sourced(ws, *cmd, timeout=120):
     return run(["sh", "-c", script, "sh", ws.ws / "install", *cmd], timeout=timeout, cwd=ws.ws, env=colcon_env(ws.ws))
 
 
+@pytest.mark.parametrize("colcon_ws", ["plain"], indirect=True)
 def test_colcon_finds_gyro_sim_only(colcon_ws):
     # resource/gyro_ctl_manifest/package.xml is gyro_ctl's manifest, not a package colcon should build
-    if colcon_ws.mode != "plain":
-        pytest.skip("one check is enough")
     r = run([BIN / "colcon", "--log-base", os.devnull, "list", "--base-paths", colcon_ws.ws / "src"],
             env=colcon_env(colcon_ws.ws))
     assert r.returncode == 0, r.stderr
@@ -440,12 +439,11 @@ def test_ros_index_cli(tmp_path):
     check_ament_prefix(prefix)
 
 
+@pytest.mark.parametrize("colcon_ws", ["plain"], indirect=True)
 def test_ros_index_is_what_colcon_installs(colcon_ws, tmp_path):
     """The same files as setup.py's data_files (colcon's install less its own files and the console scripts)."""
     from gyro_sim.ros.index import install_index
 
-    if colcon_ws.mode != "plain":
-        pytest.skip("one comparison is enough")
     p = colcon_ws.prefix
     scripts = {f"lib/gyro_sim/{e.name}" for e in distribution("gyro_sim").entry_points if e.group == "console_scripts"}
     colcon_own = re.compile(r"lib/python3[^/]*/|share/colcon-core/"
