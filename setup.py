@@ -5,9 +5,11 @@ Works two ways:
     optional ``ros`` extra: ``pip install '.[ros]'``);
   * ``colcon build`` in a ROS 2 workspace, where ``package.xml`` names the ROS deps.
 
-The data_files put the ament index marker, package.xml and config/*.yaml under
-``<prefix>/share`` so ``ros2 run gyro_sim ...`` and ``get_package_share_directory``
-work with either tool.
+The data_files put the ament index markers, the manifests, config/*.yaml and the launch file
+under ``<prefix>/share`` and the ``ros2 run`` executables under ``<prefix>/lib`` so ``ros2 run
+gyro_sim ...``, ``ros2 launch gyro_sim gyro_sim.launch.py`` and ``get_package_share_directory``
+work with either tool (with ``pip install -e``, ``gyro-sim ros-index`` lays them out:
+gyro_sim/ros/index.py).
 """
 from glob import glob
 import os
@@ -15,7 +17,8 @@ import os
 from setuptools import find_packages, setup
 
 package_name = 'gyro_sim'
-here = os.path.abspath(os.path.dirname(__file__))
+# realpath: colcon build --symlink-install runs a symlink to this file from the build folder
+here = os.path.dirname(os.path.realpath(__file__))
 
 
 def _read(name):
@@ -30,12 +33,13 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name, 'resource/gyro_ctl']),
         # `ros2 run gyro_sim simulator` and `ros2 run gyro_ctl controller` (gyro_ctl is indexed as a
-        # package of its own, sharing this package.xml)
+        # package of its own, with its own manifest)
         ('lib/' + package_name, ['scripts/simulator']),
         ('lib/gyro_ctl', ['scripts/controller']),
-        ('share/gyro_ctl', ['package.xml']),
+        ('share/gyro_ctl', ['resource/gyro_ctl_manifest/package.xml']),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     python_requires='>=3.10',
     install_requires=[
@@ -69,6 +73,11 @@ setup(
             'hypothesis>=6',
             'mpmath>=1.3',  # 50-digit reference values of [M] (2.13) in test_conductor
             'mcap-ros2-support>=0.5',  # independent reader of recorded bags in test_recording
+            # `colcon build` of this package in test_packaging (colcon-ros: ament_python packages)
+            'colcon-core>=0.21',
+            'colcon-ros>=0.5',
+            'colcon-python-setup-py>=0.2.9',
+            'colcon-package-information>=0.4',  # `colcon list`
         ],
         # `gyro-sim sweep` (gyro_sim/sweep.py): runs on a Dask cluster (local or by scheduler
         # address), results as Parquet, progress bar. The core imports none of these.

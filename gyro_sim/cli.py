@@ -11,6 +11,7 @@
     gyro-sim sweep SCENE|SWEEP ...  parameter sweeps and Monte Carlo on Dask
     gyro-sim flywheel-plan ...      wheel axis, turn and speed profile for a wanted attitude ([S]);
                                     --write-scene FILE writes a ready-to-run scene
+    gyro-sim ros-index [PREFIX]     the ament index of an editable install, for `ros2 run gyro_sim ...`
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
@@ -139,6 +140,19 @@ def build_parser() -> argparse.ArgumentParser:
     fp.add_argument("--force", action="store_true", help="with --write-scene: overwrite FILE")
     fp.set_defaults(func=_cmd_flywheel_plan)
 
+    idx = sub.add_parser(
+        "ros-index",
+        help="make `ros2 run gyro_sim ...` work from an editable install (pip install -e)",
+        description="Lay out what `pip install .` and `colcon build` install for ROS 2 and `pip install -e` does "
+                    "not: the ament index entries of gyro_sim and gyro_ctl, their package.xml, config/, launch/ "
+                    "and the `ros2 run` executables, under PREFIX (default: this Python's prefix, e.g. the venv), "
+                    "as symlinks into the source tree. Then AMENT_PREFIX_PATH=PREFIX finds the packages. "
+                    "Idempotent.",
+    )
+    idx.add_argument("prefix", metavar="PREFIX", type=Path, nargs="?", default=None,
+                     help=f"install prefix (default: {sys.prefix})")
+    idx.set_defaults(func=_cmd_ros_index)
+
     scenes = sub.add_parser(
         "scenes",
         help="list the built-in scenes",
@@ -211,6 +225,22 @@ def _error(message: str) -> int:
     return EXIT_USAGE
 
 
+def _ros_missing(what: str) -> bool:
+    """True (after one ``error:`` line) if rclpy cannot be found: ``what`` needs the ROS 2 Python packages.
+
+    Checked in this process before anything starts: the node processes would each end in a traceback."""
+    import importlib.util
+
+    try:
+        found = importlib.util.find_spec("rclpy") is not None
+    except (ImportError, ValueError):  # a parent package missing, or a module without a spec
+        found = False
+    if not found:
+        _error(f"{what} needs the ROS 2 Python packages (rclpy): pip install 'gyro_sim[ros]' "
+               "(or source a ROS 2 install)")
+    return not found
+
+
 # --- commands ---------------------------------------------------------------
 
 class _Progress:
@@ -244,6 +274,8 @@ class _Progress:
 
 
 def _cmd_run(args) -> int:
+    if args.ros and _ros_missing("gyro-sim run --ros"):
+        return EXIT_USAGE
     # Imported here so that --help works fast and without the numerical stack.
     from gyro_sim import plotting
     from gyro_sim import scene as scene_mod
@@ -385,6 +417,8 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_replay(args) -> int:
+    if not args.check and _ros_missing("gyro-sim replay (without --check)"):
+        return EXIT_USAGE
     if not (math.isfinite(args.rate) and args.rate > 0):
         return _error(f"--rate {args.rate}: must be a positive number")
     if args.wait_for_subscribers < 0:
@@ -486,6 +520,23 @@ def _cmd_flywheel_plan(args) -> int:
             return _error(f"cannot write the scene {path}: {exc.strerror or exc}")
         text += f"{'scene written':<20} {path}  (run: gyro-sim run {path})\n"
     _write(sys.stdout, text)
+    return EXIT_OK
+
+
+def _cmd_ros_index(args) -> int:
+    from gyro_sim.ros.index import install_index, source_root
+
+    prefix = (args.prefix or Path(sys.prefix)).absolute()
+    if source_root() is None:  # an installed copy: pip installed the index with it
+        return _error(f"gyro_sim is not an editable install (no source tree): `pip install` put its ament index "
+                      f"under {sys.prefix} already")
+    try:
+        changed = install_index(prefix)
+    except OSError as exc:
+        return _error(f"cannot lay out the ament index under {prefix}: {exc}")
+    _write(sys.stdout, f"ament index of gyro_sim and gyro_ctl under {prefix} ({len(changed)} paths made or updated); "
+                       "use it with:\n"
+                       f"  export AMENT_PREFIX_PATH={prefix}${{AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}}\n")
     return EXIT_OK
 
 

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import importlib
+import itertools
 import math
 import signal
 import threading
 import time
-from typing import Callable, Optional
+from typing import Callable, Iterable, Optional
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -67,11 +68,36 @@ def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     return (names, cur, rate or None, stamp), ""
 
 
-def node_main(who: str, build: Callable, loop: Callable, args=None) -> int:
+def wants_help(argv) -> bool:
+    """``-h`` or ``--help`` among the arguments before ``--ros-args`` (after it they are ROS's)."""
+    return any(a in ("-h", "--help") for a in itertools.takewhile(lambda a: a != "--ros-args", argv))
+
+
+def node_usage(command: str, params: Iterable = ()) -> str:
+    """Usage text of a node: how to run ``command`` and its parameters, ``(name, default, description, ...)``
+    tuples (extra items, e.g. a range, are ignored)."""
+    rows = [(p[0], repr(p[1]), p[2]) for p in params]
+    text = (f"usage: {command} [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] [-r __ns:=/NS]]\n"
+            "\nROS 2 node; -h/--help before --ros-args prints this text.\n")
+    if rows:
+        wn, wd = max(len(r[0]) for r in rows), max(len(r[1]) for r in rows)
+        text += "\nparameters (name, default, description):\n" + "".join(
+            f"  {n:<{wn}}  {d:<{wd}}  {desc}\n" for n, d, desc in rows)
+    return text
+
+
+def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optional[str] = None) -> int:
     """Run a node process: rclpy without its signal handlers (SIGINT/SIGTERM set ``stop`` instead),
     ``build()`` the node (a SceneError or a refused parameter ends it with one ``who: error:`` line,
-    status 2), then ``loop(node, stop)``; always cleans up."""
+    status 2), then ``loop(node, stop)``; always cleans up.
+
+    ``-h``/``--help`` before ``--ros-args`` (in ``args``, default ``sys.argv``) prints ``usage`` (default: a
+    :func:`node_usage` without parameters) and returns 0 without initialising rclpy."""
     import sys
+
+    if wants_help(sys.argv if args is None else args):
+        print(usage or node_usage(who), end="")
+        return 0
 
     import rclpy
     from rclpy.exceptions import ParameterException
@@ -168,4 +194,4 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
 
 
 __all__ = ["message_class", "qos_profile", "msg_time", "parse_command", "stop_on_signals", "node_main",
-           "flush_publishers", "wait_for_matches", "stamp_ns"]
+           "node_usage", "wants_help", "flush_publishers", "wait_for_matches", "stamp_ns"]
