@@ -20,6 +20,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from pydantic import ValidationError
+from pydantic_core import PydanticUndefined
 
 from gyro_sim.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, command_message,
                                to_ros)
@@ -35,19 +36,18 @@ ROS_LAWS = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}
 
 #: law parameters exposed as ROS parameters: name → (law, kind, description)
 LAW_PARAMS = {
-    "stator": ("spinup", "str", "the stator driven, a stator of the scene (default z3)"),
+    "stator": ("spinup", "str", "the stator driven, a stator of the scene"),
     "target_spin": ("spinup", "float", "target spin = field rate, rad/s"),
     "current": ("spinup", "float", "current amplitude, A"),
     "ramp": ("spinup", "float", "current ramp, A/s (0 = none: the full current at once)"),
-    "control_stators": ("psi_switching", "str[]", "the control stators, stators of the scene (default [z1, z2])"),
-    "spin_stator": ("psi_switching", "str", "the spin stator, a stator of the scene (default z3)"),
+    "control_stators": ("psi_switching", "str[]", "the control stators, stators of the scene"),
+    "spin_stator": ("psi_switching", "str", "the spin stator, a stator of the scene"),
     "nu": ("psi_switching", "float|float[]", "control field rate(s) ν, rad/s: one value or one per control stator "
                                              "(> 0: θ → 0, < 0: θ → π)"),
     "control_current": ("psi_switching", "float", "control current, A"),
     "spin_current": ("psi_switching", "float", "spin stator current, A"),
     "spin_rate": ("psi_switching", "float", "spin stator field rate ν0, rad/s"),
-    "dead_band": ("psi_switching", "float", "θ (and π − θ) below which the control currents are off, rad "
-                                            "(default 0.001)"),
+    "dead_band": ("psi_switching", "float", "θ (and π − θ) below which the control currents are off, rad"),
 }
 _UNSET = {"str": "", "str[]": [""], "float": math.nan, "float|float[]": math.nan}
 _EXPECTED = {"str": "a string", "str[]": "a list of strings", "float": "a number",
@@ -170,6 +170,9 @@ def resolve(scene, current: ControllerConfig | None, law: str | None, given: dic
 def _describe(name: str) -> ParameterDescriptor:
     law, kind, desc = LAW_PARAMS[name]
     unset = {"str": "''", "str[]": "['']"}.get(kind, "NaN")
+    default = ROS_LAWS[law].model_fields[name].default
+    if default is not None and default is not PydanticUndefined:
+        desc += f" (default {default})"
     return ParameterDescriptor(
         description=(f"{law}: {desc}. Shows the value in force while law is {law}; while the law in force is "
                      f"another (the parameter is not in force) it shows {unset}, and setting it is refused unless "
