@@ -110,13 +110,30 @@ class ControllerConfig(_Strict):
         return data
 
     def stators_used(self) -> list[str]:
-        p = self.params
-        if isinstance(p, SpinupParams):
-            return [p.stator]
-        if isinstance(p, PsiSwitchingParams):
-            return [*p.control_stators, p.spin_stator]
-        if isinstance(p, ManualParams):
-            return list(p.commands)
-        if isinstance(p, ReorientParams):
-            return p.stators_used()
-        return []
+        return [n for _, _, used in stator_parameters(self.params) for n in used]
+
+
+def stator_parameters(params) -> list[tuple[str, object, list[str]]]:
+    """The law parameters that name stators: (parameter name, its value, the stator names in it)."""
+    p = params
+    if isinstance(p, SpinupParams):
+        return [("stator", p.stator, [p.stator])]
+    if isinstance(p, PsiSwitchingParams):
+        return [("control_stators", list(p.control_stators), list(p.control_stators)),
+                ("spin_stator", p.spin_stator, [p.spin_stator])]
+    if isinstance(p, ManualParams):
+        return [("commands", list(p.commands), list(p.commands))]
+    if isinstance(p, ReorientParams):
+        return [("rates", list(p.rates), p.stators_used())]
+    return []
+
+
+def unknown_stators(cfg: ControllerConfig, names) -> str:
+    """'' if every stator the law of ``cfg`` names is one of ``names`` (the scene's stators), else the reason:
+    the parameter, its value and the allowed names (one check for scene files and the controller node)."""
+    names = list(names)
+    for pname, value, used in stator_parameters(cfg.params):
+        bad = [n for n in used if n not in names]
+        if bad:
+            return f"{pname} = {value!r}: stator {bad[0]!r} is not defined; allowed: {names or 'none defined'}"
+    return ""

@@ -76,7 +76,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator, model_validator
 
-from gyro_ctl.config import ControllerConfig
+from gyro_ctl.config import ControllerConfig, unknown_stators
 
 from .effect_config import Effects
 
@@ -309,11 +309,9 @@ class Scene(_Strict):
             if c.current is None and c.rate is None:
                 raise ValueError(f"commands.{i}: a command sets current and/or rate; it has neither")
         if self.controller is not None:
-            for n in self.controller.stators_used():
-                if n not in names:
-                    raise ValueError(
-                        f"controller.params: stator {n!r} is not defined; allowed: {names or 'none defined'}"
-                    )
+            err = unknown_stators(self.controller, names)
+            if err:
+                raise ValueError(f"controller.params.{err}")
         if self.integrator.method == "frozen_flow":
             J = self.rotor.inertia
             if not (J[0] == J[1] or J[1] == J[2] or J[0] == J[2]):

@@ -17,8 +17,18 @@
                                                                    it) and send one malformed command first
     python ros_probe.py stamped NS SECONDS PERIOD                  valid commands with wrong stamps (0 and the
                                                                    wall clock, alternately) every PERIOD s
+    python ros_probe.py params OUT.json SECONDS NODE REQUESTS      wait (≤ SECONDS) for NODE's parameter
+                                                                   services, run REQUESTS (a JSON list, in
+                                                                   order) through its parameter services, write
+                                                                   the answers as JSON
 
 Topic and service names are relative to the probe's namespace (as the nodes use them); NS '/' is the root.
+
+A request of ``params`` is one of {"get": [names]} → {name: value}, {"describe": [names]} → {name:
+{description, read_only, dynamic_typing, type}}, {"set": {name: value}} (service set_parameters: one result
+per parameter, as ``ros2 param set``) → [{successful, reason}], {"set_atomically": {name: value}} (service
+set_parameters_atomically: all or none) → {successful, reason}. Values as JSON (NaN allowed); a number
+without a decimal point is sent as an integer parameter.
 """
 import json
 import sys
@@ -248,6 +258,45 @@ def stamped(ns: str, seconds: float, period: float) -> None:
     node.destroy_node()
 
 
+def params(out: str, seconds: float, node_name: str, requests: list) -> None:
+    from rclpy.parameter import Parameter, parameter_value_to_python
+    from rclpy.parameter_client import AsyncParameterClient
+
+    node = Node("gyro_param_probe")
+    client = AsyncParameterClient(node, node_name)
+    ready = client.wait_for_services(timeout_sec=seconds)
+    answers = []
+
+    def call(future):
+        rclpy.spin_until_future_complete(node, future, timeout_sec=seconds)
+        if not future.done():
+            raise TimeoutError(f"no answer from {node_name} within {seconds} s")
+        return future.result()
+
+    for req in requests if ready else []:
+        (op, arg), = req.items()
+        if op == "get":
+            r = call(client.get_parameters(list(arg)))
+            answers.append({n: parameter_value_to_python(v) for n, v in zip(arg, r.values)})
+        elif op == "describe":
+            r = call(client.describe_parameters(list(arg)))
+            answers.append({d.name: {"description": d.description, "read_only": d.read_only,
+                                     "dynamic_typing": d.dynamic_typing, "type": d.type} for d in r.descriptors})
+        elif op in ("set", "set_atomically"):
+            ps = [Parameter(n, value=v) for n, v in arg.items()]
+            if op == "set":
+                r = call(client.set_parameters(ps))
+                answers.append([{"successful": x.successful, "reason": x.reason} for x in r.results])
+            else:
+                r = call(client.set_parameters_atomically(ps))
+                answers.append({"successful": r.result.successful, "reason": r.result.reason})
+        else:
+            raise ValueError(f"unknown request {op!r}")
+    with open(out, "w") as f:
+        json.dump({"ready": ready, "answers": answers}, f)
+    node.destroy_node()
+
+
 if __name__ == "__main__":
     rclpy.init()
     try:
@@ -262,6 +311,8 @@ if __name__ == "__main__":
             answer(a[0], float(a[1]), a[2], float(a[3]), float(a[4]))
         elif cmd == "stamped":
             stamped(a[0], float(a[1]), float(a[2]))
+        elif cmd == "params":
+            params(a[0], float(a[1]), a[2], json.loads(a[3]))
         else:
             raise SystemExit(f"ros_probe: unknown command {cmd!r}")
     finally:

@@ -109,8 +109,28 @@ def test_off_hold_manual(law, params, check):
     assert check(gyro_sim.run(s))
 
 
+@pytest.mark.parametrize("law,params,reason", [
+    ("spinup", {"stator": "z9", "target_spin": 1.0, "current": 1.0}, "stator = 'z9': stator 'z9'"),
+    ("psi_switching", {"control_stators": ["z1", "z9"], "nu": 1.0, "control_current": 1.0, "spin_current": 1.0,
+                       "spin_rate": 1.0}, "control_stators = ['z1', 'z9']: stator 'z9'"),
+    ("psi_switching", {"spin_stator": "z7", "nu": 1.0, "control_current": 1.0, "spin_current": 1.0,
+                       "spin_rate": 1.0}, "spin_stator = 'z7': stator 'z7'"),
+    ("manual", {"commands": {"z3": {"current": 1.0, "rate": 1.0}, "z8": {"current": 1.0, "rate": 1.0}}},
+     "commands = ['z3', 'z8']: stator 'z8'"),
+])
+def test_unknown_stators_names_the_parameter_value_and_allowed(law, params, reason):
+    """The one check of a law's stator names against a scene's (scene files and the controller node use it)."""
+    from gyro_ctl.config import ControllerConfig, unknown_stators
+
+    cfg = ControllerConfig(law=law, params=params)
+    assert unknown_stators(cfg, ["z1", "z2", "z3"]) == f"{reason} is not defined; allowed: ['z1', 'z2', 'z3']"
+    assert unknown_stators(cfg, ["z1", "z2", "z3", "z7", "z8", "z9"]) == ""
+    assert unknown_stators(ControllerConfig(law="off", params={}), []) == ""
+
+
 def test_bad_controller_section_is_refused():
-    with pytest.raises(gyro_sim.SceneError, match=r"controller.params: stator 'z9' is not defined"):
+    with pytest.raises(gyro_sim.SceneError,
+                       match=r"controller.params.spin_stator = 'z9': stator 'z9' is not defined; allowed: \['z1', 'z2', 'z3'\]"):
         gyro_sim.load_scene("nutation_oblate", overrides={"controller.params.spin_stator": "z9"})
     with pytest.raises(gyro_sim.SceneError, match=r"one rate per control stator"):
         gyro_sim.load_scene("nutation_oblate", overrides={"controller.params.nu": [1.0, 2.0, 3.0]})

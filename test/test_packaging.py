@@ -62,6 +62,9 @@ def test_node_help_exits_without_running(module):
                 env=dict(os.environ, ROS_DOMAIN_ID=str(unique_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
         assert r.returncode == 0, r.stderr
         assert r.stdout.startswith("usage:") and "--ros-args" in r.stdout, r.stdout
+        # the parameters the node declares, each with its description
+        for name in ("scene", "law", "nu") if "ctl" in module else ("scene", "control_period", "step_ticks"):
+            assert re.search(rf"^  {name} ", r.stdout, re.M), (name, r.stdout)
 
 
 def test_node_main_help_prints_the_usage_and_never_starts_rclpy(monkeypatch, capsys):

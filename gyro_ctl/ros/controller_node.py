@@ -4,10 +4,13 @@ Subscribes ``/gyro/imu`` (attitude, body rates) and ``/gyro/kinetic_moment`` (L,
 stamp at which both have arrived it evaluates the law and publishes ``/gyro/stator_commands`` with that
 stamp (lockstep simulators wait for exactly that stamp). The law and its parameters come from the
 scene's ``controller`` section and can be overridden by ROS parameters (also at run time with
-``ros2 param set``); a value that does not validate is refused with the reason.
+``ros2 param set``); a value that does not validate, a stator the scene does not have, or a parameter
+of a law not in force is refused with the reason. The parameters always show what is in force.
 """
 from __future__ import annotations
 
+import array
+import math
 import sys
 import threading
 
@@ -15,7 +18,9 @@ import numpy as np
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from pydantic import ValidationError
+from pydantic_core import PydanticUndefined
 
 from gyro_sim.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, command_message,
                                node_topic, to_ros)
@@ -23,53 +28,190 @@ from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
 from gyro_sim.scene import SceneError, load_scene
 from gyro_sim.simulate import stator_triad
 
-from ..config import ControllerConfig
+from ..config import LAW_NAMES, ControllerConfig, PsiSwitchingParams, SpinupParams, unknown_stators
 from ..laws import ControlInput, make_law
 
-#: law parameters exposed as ROS parameters: name → (type default, description)
+#: the laws whose parameters are ROS parameters (the others take theirs from the scene's controller section)
+ROS_LAWS = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}
+
+#: law parameters exposed as ROS parameters: name → (law, kind, description)
 LAW_PARAMS = {
-    "stator": ("", "spinup: the spin-up stator"),
-    "target_spin": (float("nan"), "spinup: target spin = field rate, rad/s"),
-    "current": (float("nan"), "spinup: current amplitude, A"),
-    "ramp": (0.0, "spinup: current ramp, A/s (0 = none)"),
-    "control_stators": ([""], "psi_switching: control stator names"),
-    "spin_stator": ("", "psi_switching: the spin stator"),
-    "nu": (float("nan"), "psi_switching: control field rate(s), rad/s: one value or one per control stator "
-                         "(> 0: θ → 0, < 0: θ → π)"),
-    "control_current": (float("nan"), "psi_switching: control current, A"),
-    "spin_current": (float("nan"), "psi_switching: spin stator current, A"),
-    "spin_rate": (float("nan"), "psi_switching: spin stator field rate ν0, rad/s"),
-    "dead_band": (float("nan"), "psi_switching: θ below which the control currents are off, rad"),
+    "stator": ("spinup", "str", "the stator driven, a stator of the scene"),
+    "target_spin": ("spinup", "float", "target spin = field rate, rad/s"),
+    "current": ("spinup", "float", "current amplitude, A"),
+    "ramp": ("spinup", "float", "current ramp, A/s (0 = none: the full current at once)"),
+    "control_stators": ("psi_switching", "str[]", "the control stators, stators of the scene"),
+    "spin_stator": ("psi_switching", "str", "the spin stator, a stator of the scene"),
+    "nu": ("psi_switching", "float|float[]", "control field rate(s) ν, rad/s: one value or one per control stator "
+                                             "(> 0: θ → 0, < 0: θ → π)"),
+    "control_current": ("psi_switching", "float", "control current, A"),
+    "spin_current": ("psi_switching", "float", "spin stator current, A"),
+    "spin_rate": ("psi_switching", "float", "spin stator field rate ν0, rad/s"),
+    "dead_band": ("psi_switching", "float", "θ (and π − θ) below which the control currents are off, rad"),
 }
+_UNSET = {"str": "", "str[]": [""], "float": math.nan, "float|float[]": math.nan}
+_EXPECTED = {"str": "a string", "str[]": "a list of strings", "float": "a number",
+             "float|float[]": "a number or a list of numbers"}
+for _law, _model in ROS_LAWS.items():  # one list of each law's parameters: the model's
+    assert [n for n, v in LAW_PARAMS.items() if v[0] == _law] == [n for n in _model.model_fields if n != "law"]
 
 
-def _unset(v) -> bool:
-    return v is None or v == "" or v == [""] or (isinstance(v, float) and v != v)
+def law_fields(law: str) -> list:
+    """The ROS parameters of ``law``, in the order of its model ([] for laws without ROS parameters)."""
+    model = ROS_LAWS.get(law)
+    return [n for n in model.model_fields if n != "law"] if model else []
+
+
+def _is_unset(v) -> bool:
+    """The value a parameter shows while its law is not in force (NaN, '', ['']; at start-up: not given)."""
+    if isinstance(v, str):
+        return v == ""
+    if isinstance(v, float):
+        return math.isnan(v)
+    if isinstance(v, (list, tuple)):
+        return list(v) == [""]
+    return v is None
+
+
+def _from_ros(name: str, v) -> tuple:
+    """(value for the law model, '') or (None, reason) of a ROS parameter value (integers taken as numbers)."""
+    kind = LAW_PARAMS[name][1]
+    num = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
+    seq = isinstance(v, (list, tuple, array.array))
+    if kind == "float" and num(v):
+        return (None if name == "ramp" and v == 0 else float(v)), ""
+    if kind == "float|float[]" and num(v):
+        return float(v), ""
+    if kind == "float|float[]" and seq and len(v) > 0 and all(num(x) for x in v):
+        return [float(x) for x in v], ""
+    if kind == "str" and isinstance(v, str):
+        return v, ""
+    if kind == "str[]" and seq and all(isinstance(x, str) for x in v):
+        return list(v), ""
+    return None, f"{name} = {v!r}: expected {_EXPECTED[kind]}"
+
+
+def _to_ros(name: str, cfg: ControllerConfig) -> Parameter:
+    """The ROS parameter showing ``name`` under ``cfg``: its value in force (ramp None: 0), or its unset value if
+    its law is not in force."""
+    kind = LAW_PARAMS[name][1]
+    if name not in law_fields(cfg.law):
+        v = _UNSET[kind]
+    else:
+        v = getattr(cfg.params, name)
+        v = 0.0 if v is None else v  # (ramp: none)
+    if kind == "str":
+        return Parameter(name, Parameter.Type.STRING, str(v))
+    if kind == "str[]":
+        return Parameter(name, Parameter.Type.STRING_ARRAY, [str(x) for x in v])
+    if isinstance(v, (list, tuple)):
+        return Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(x) for x in v])
+    return Parameter(name, Parameter.Type.DOUBLE, float(v))
+
+
+def resolve(scene, current: ControllerConfig | None, law: str | None, given: dict) -> tuple:
+    """(ControllerConfig, '') or (None, reason): the config in force after setting ``given`` (ROS parameter name →
+    ROS value) and ``law`` (None: the one in force; '': the scene's).
+
+    The law's parameters not given come from the config in force if the law is unchanged, else from the scene's
+    controller section if it has that law, else from the law model's defaults. A parameter of another law is
+    refused unless it is given its unset value (NaN, '', ['']: what it shows; nothing changes). Every stator
+    named must be one of the scene's (:func:`gyro_ctl.config.unknown_stators`).
+    """
+    base_cfg = scene.controller
+    if law is None:
+        law = current.law
+    if law == "":
+        if base_cfg is None:
+            return None, ("no control law: the scene has no controller section and parameter law is empty; "
+                          "allowed: spinup, psi_switching, off, hold")
+        law = base_cfg.law
+    if law not in LAW_NAMES:
+        return None, (f"law = {law!r}: allowed: spinup, psi_switching, off, hold, or the scene's law "
+                      f"({base_cfg.law if base_cfg else 'none'}; manual, reorient: the scene's only)")
+    fields = law_fields(law)
+    params: dict = {}
+    if current is not None and current.law == law:
+        params = current.params.model_dump(exclude={"law"})
+    elif base_cfg is not None and base_cfg.law == law:
+        params = base_cfg.params.model_dump(exclude={"law"})
+    elif law not in ROS_LAWS and law not in ("off", "hold"):
+        return None, (f"law {law!r}: its parameters come from the scene's controller section only, and the scene's "
+                      f"law is {base_cfg.law if base_cfg else 'none'!r}")
+    for n, v in given.items():
+        if n not in fields:
+            if _is_unset(v):
+                continue
+            its = (f"its parameters: {', '.join(fields)}" if fields else
+                   "it has none" if law in ("off", "hold") else "its parameters come from the scene only")
+            return None, f"{n}: not a parameter of law {law!r} ({its})"
+        value, err = _from_ros(n, v)
+        if err:
+            return None, f"law {law!r}: {err}"
+        params[n] = value
+    limits = {k: getattr(base_cfg, k) for k in ("current_limit", "rate_limit")} if base_cfg is not None else {}
+    try:
+        cfg = ControllerConfig(law=law, params=params, **limits)
+    except ValidationError as e:
+        missing = [str(er["loc"][-1]) for er in e.errors() if er["type"] == "missing"]
+        errs = [": ".join(x for x in (".".join(str(k) for k in er["loc"][2:]), er["msg"].removeprefix("Value error, "))
+                          if x) for er in e.errors() if er["type"] != "missing"]
+        if missing:
+            errs.append(f"{', '.join(missing)} not set (the scene's controller has "
+                        f"{'law ' + repr(base_cfg.law) if base_cfg else 'no section'}: give "
+                        f"{'them' if len(missing) > 1 else 'it'} together with law in one atomic set)")
+        return None, f"law {law!r}: {'; '.join(errs)}"
+    err = unknown_stators(cfg, [s.name for s in scene.stators])
+    if err:
+        return None, f"law {law!r}: {err}"
+    return cfg, ""
+
+
+def _describe(name: str) -> ParameterDescriptor:
+    law, kind, desc = LAW_PARAMS[name]
+    unset = {"str": "''", "str[]": "['']"}.get(kind, "NaN")
+    default = ROS_LAWS[law].model_fields[name].default
+    if default is not None and default is not PydanticUndefined:
+        desc += f" (default {default})"
+    return ParameterDescriptor(
+        description=(f"{law}: {desc}. Shows the value in force while law is {law}; while the law in force is "
+                     f"another (the parameter is not in force) it shows {unset}, and setting it is refused unless "
+                     f"set together with law = {law} in one atomic set"),
+        dynamic_typing=kind.startswith("float"))  # numbers: integers are taken too (shown as the floats in force)
 
 
 class ControllerNode(Node):
     def __init__(self):
         super().__init__("gyro_controller")
         self.declare_parameter("scene", "spinup_thin_shell", ParameterDescriptor(
-            description="scene file path or built-in name (stator axes, default law and parameters)"))
+            description="scene file path or built-in name (stator axes, default law and parameters); start-up only",
+            read_only=True))
         self.declare_parameter("law", "", ParameterDescriptor(
-            description="'' (the scene's), spinup, psi_switching, off, hold (manual: from the scene only)"))
-        for name, (default, desc) in LAW_PARAMS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=desc,
-                                                                      dynamic_typing=(name == "nu")))
+            description="the law in force: spinup, psi_switching, off, hold, or the scene's law (manual, reorient: "
+                        "the scene's only, with the scene's parameters); at start-up '' = the scene's law. A switch "
+                        "takes the new law's parameters from the same atomic set, else from the scene's controller "
+                        "section if it has that law, else the law's defaults; refused if they are incomplete",
+            additional_constraints="one of: spinup, psi_switching, off, hold, manual, reorient"))
+        for name, (_, kind, _) in LAW_PARAMS.items():
+            self.declare_parameter(name, _UNSET[kind], _describe(name))
         try:
             self.scene = load_scene(self.get_parameter("scene").value)
         except SceneError as e:
             raise SceneError(f"parameter scene: {e}") from None
-        cfg, err = self._config({})
+        given = {n: self.get_parameter(n).value for n in LAW_PARAMS}
+        cfg, err = resolve(self.scene, None, self.get_parameter("law").value,
+                           {n: v for n, v in given.items() if not _is_unset(v)})
         if err:
             raise SceneError(err)
-        self.cfg = cfg
-        self.law = make_law(cfg)
+        self.cfg, self.law = cfg, make_law(cfg)
+        self._next = None  # the config an accepted set puts in force
+        self._showing = False  # set while the parameters are being updated to the values in force
+        self._show(cfg)
         st = self.scene.stators
         self.names = tuple(s.name for s in st)
         self.axes = np.array([stator_triad(s.axis)[2] for s in st]).reshape(-1, 3)
         self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._after_set)
         self.pending: dict[int, dict] = {}
         self.pub = self.create_publisher(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                          qos_profile(TOPIC_STATOR_COMMANDS))
@@ -81,41 +223,42 @@ class ControllerNode(Node):
                                + _expected_time_constant(self.scene, cfg))
 
     # --- parameters --------------------------------------------------------------------------
-    def _config(self, changed: dict) -> tuple:
-        """ControllerConfig from the scene's section overridden by set ROS parameters (+ ``changed``)."""
-        value = lambda n: changed[n] if n in changed else self.get_parameter(n).value  # noqa: E731
-        base = self.scene.controller
-        law = value("law") or (base.law if base else "")
-        if not law:
-            return None, ("no control law: the scene has no controller section and parameter law is empty; "
-                          "allowed: spinup, psi_switching, off, hold")
-        params = base.params.model_dump(exclude={"law"}) if base is not None and base.law == law else {}
-        for n in LAW_PARAMS:
-            v = value(n)
-            if not _unset(v) and n in _fields(law):
-                if n == "ramp" and v == 0.0:
-                    v = None
-                elif n in ("control_stators", "nu") and not isinstance(v, (str, float, int)):
-                    v = list(v)
-                params[n] = v
-        try:
-            extra = {k: getattr(base, k) for k in ("current_limit", "rate_limit")} if base is not None else {}
-            return ControllerConfig(law=law, params=params, **extra), ""
-        except ValidationError as e:
-            errs = "; ".join(f"{'.'.join(str(x) for x in er['loc'][1:]) or 'params'}: {er['msg']}"
-                             for er in e.errors())
-            return None, f"law {law!r}: {errs}"
-
     def _on_set(self, params) -> SetParametersResult:
+        """Validate a set (all its parameters at once); the config it puts in force is kept for _after_set."""
+        if self._showing:  # our own update to the values in force
+            return SetParametersResult(successful=True)
         changed = {p.name: p.value for p in params}
-        if "scene" in changed:
+        if "scene" in changed:  # (read-only: rclpy refuses it before this callback)
             return SetParametersResult(successful=False, reason="scene: set at start-up only")
-        cfg, err = self._config(changed)
+        cfg, err = resolve(self.scene, self.cfg, changed.pop("law", None), changed)
         if err:
             return SetParametersResult(successful=False, reason=err)
-        self.cfg, self.law = cfg, make_law(cfg)
-        self.get_logger().info(f"controller: now law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}")
+        self._next = cfg
         return SetParametersResult(successful=True)
+
+    def _after_set(self, params) -> None:
+        """Put the accepted config in force and show it (our own update comes back here: ignored)."""
+        if self._showing or self._next is None:
+            return
+        cfg, self._next = self._next, None
+        if cfg != self.cfg:
+            self.cfg, self.law = cfg, make_law(cfg)
+            self.get_logger().info(f"controller: now law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}")
+        self._show(cfg)
+
+    def _show(self, cfg: ControllerConfig) -> None:
+        """Set law and the law parameters to what is in force (the other laws' parameters to their unset value)."""
+        want = [Parameter("law", Parameter.Type.STRING, cfg.law)] + [_to_ros(n, cfg) for n in LAW_PARAMS]
+        update = [p for p in want if not _same(self.get_parameter(p.name), p)]
+        if not update:
+            return
+        self._showing = True
+        try:
+            r = self.set_parameters_atomically(update)
+            if not r.successful:
+                self.get_logger().error(f"controller: could not show the parameters in force: {r.reason}")
+        finally:
+            self._showing = False
 
     # --- state in, command out ---------------------------------------------------------------
     def _on(self, msg, kind: str) -> None:
@@ -157,11 +300,15 @@ def _expected_time_constant(scene, cfg) -> str:
     return f", expected time constant {spinup_time_constant(scene.inertia[2], k_e, st.coil_constant, cfg.params.current):.4g} s"
 
 
-def _fields(law: str) -> set:
-    from ..config import PsiSwitchingParams, SpinupParams
-
-    model = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}.get(law)  # others: from the scene only
-    return set(model.model_fields) - {"law"} if model else set()
+def _same(a: Parameter, b: Parameter) -> bool:
+    """Same type and value (NaN equal to NaN)."""
+    if a.type_ != b.type_:
+        return False
+    va, vb = a.value, b.value
+    if isinstance(va, (list, tuple, array.array)):
+        va, vb = list(va), list(vb)
+        return len(va) == len(vb) and all(x == y or (x != x and y != y) for x, y in zip(va, vb))
+    return va == vb or (va != va and vb != vb)
 
 
 def _spin(node: ControllerNode, stop: threading.Event) -> int:
@@ -170,9 +317,19 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
     return 0
 
 
+def usage() -> str:
+    """``--help`` text: the parameters with their unset defaults (the scene's controller section fills them)."""
+    from gyro_sim.ros.common import node_usage
+
+    base = (("scene", "spinup_thin_shell", "scene file path or built-in name (read-only)"),
+            ("law", "", "'' (the scene's), " + ", ".join(sorted(ROS_LAWS)) + ", off, hold"))
+    return node_usage("ros2 run gyro_ctl controller",
+                      base + tuple((n, _UNSET[k], f"{law}: {d}") for n, (law, k, d) in LAW_PARAMS.items()))
+
+
 def main(args=None) -> int:
     """Entry point (`ros2 run gyro_ctl controller`, console script `gyro-ctl-controller`)."""
-    return node_main("controller", ControllerNode, _spin, args)
+    return node_main("controller", ControllerNode, _spin, args, usage=usage())
 
 
 if __name__ == "__main__":

@@ -55,6 +55,27 @@ DEFAULT_CONTROL_PERIOD = 0.01
 DIAGNOSTICS_PERIOD = 1.0  # wall s between /diagnostics messages
 SUBSCRIBERS_REFRESH = 0.25  # wall s between looks at who subscribes to the per-sample topics
 RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks")
+#: the node's parameters: (name, default, description, range, read-only); defaults None come from the scene
+PARAMETERS = (
+    ("scene", "spinup_thin_shell", "scene file path or built-in scene name", None, True),
+    ("mode", "lockstep", f"timing mode: {', '.join(MODES)}", None, True),
+    ("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", (1e-3, 1e4), False),
+    ("duration", 0.0, "simulated duration in s (0 = the scene's)", (0.0, 1e9), True),
+    ("record", "", "bag directory to record to (empty = no recording)", None, True),
+    ("control_period", None, "s between control ticks, where commands are taken (default: the scene controller's "
+     f"period; {DEFAULT_CONTROL_PERIOD:g} s for a scene without a controller section)", (1e-6, 3600.0), True),
+    ("expect_controller", None, "a controller is expected (default: the scene has a controller section): lockstep "
+     "waits for its command at each tick, the watchdog watches it", None, True),
+    ("watchdog_timeout", 2.0, "wall s without a valid command before the currents go to 0 A (0 = off)",
+     (0.0, 3600.0), False),
+    ("startup_timeout", 30.0, "wall s to wait for the first command (lockstep) or for the subscribers of "
+     "wait_for_subscribers (0 = no bound)", (0.0, 3600.0), False),
+    ("wait_for_subscribers", 0, "before the first step, wait (at most startup_timeout) until this many "
+     "subscriptions are matched to the node's topics, summed over the topics (0 = start at once)", (0, 10000), True),
+    ("start_paused", False, "start paused at t = 0 (after publishing the initial state): gyro/step, gyro/resume go "
+     "on", None, True),
+    ("step_ticks", 1, "control ticks one call of gyro/step runs", (1, 1_000_000_000), False),
+)
 
 
 def tf_available() -> bool:
@@ -88,33 +109,17 @@ class SimulatorNode(Node):
 
     def __init__(self):
         super().__init__("gyro_simulator")
-        d = self._declare
-        d("scene", "spinup_thin_shell", "scene file path or built-in scene name", read_only=True)
+        self._declare(*PARAMETERS[0])  # the scene first: two defaults come from it
         try:
             self.scene = load_scene(self.get_parameter("scene").value)
         except SceneError as e:
             raise SceneError(f"parameter scene = {self.get_parameter('scene').value!r}: {e}") from None
         ctl = self.scene.controller
-        period = (ctl.period or 1.0 / self.scene.output.rate) if ctl is not None else DEFAULT_CONTROL_PERIOD
-        d("mode", "lockstep", f"timing mode: {', '.join(MODES)}", read_only=True)
-        d("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", (1e-3, 1e4))
-        d("duration", 0.0, "simulated duration in s (0 = the scene's)", (0.0, 1e9), read_only=True)
-        d("record", "", "bag directory to record to (empty = no recording)", read_only=True)
-        d("control_period", float(period), "s between control ticks, where commands are taken (default: the "
-          f"scene controller's period; {DEFAULT_CONTROL_PERIOD:g} s for a scene without a controller section)",
-          (1e-6, 3600.0), read_only=True)
-        d("expect_controller", ctl is not None, "a controller is expected (default: the scene has a controller "
-          "section): lockstep waits for its command at each tick, the watchdog watches it", read_only=True)
-        d("watchdog_timeout", 2.0, "wall s without a valid command before the currents go to 0 A (0 = off)",
-          (0.0, 3600.0))
-        d("startup_timeout", 30.0, "wall s to wait for the first command (lockstep) or for the subscribers of "
-          "wait_for_subscribers (0 = no bound)", (0.0, 3600.0))
-        d("wait_for_subscribers", 0, "before the first step, wait (at most startup_timeout) until this many "
-          "subscriptions are matched to the node's topics, summed over the topics (0 = start at once)", (0, 10000),
-          read_only=True)
-        d("start_paused", False, "start paused at t = 0 (after publishing the initial state): gyro/step, "
-          "gyro/resume go on", read_only=True)
-        d("step_ticks", 1, "control ticks one call of gyro/step runs", (1, 1_000_000_000))
+        in_force = {"control_period": float((ctl.period or 1.0 / self.scene.output.rate) if ctl is not None
+                                            else DEFAULT_CONTROL_PERIOD),
+                    "expect_controller": ctl is not None}
+        for name, default, description, rng, read_only in PARAMETERS[1:]:
+            self._declare(name, in_force.get(name, default), description, rng, read_only)
         self.add_on_set_parameters_callback(self._on_set)
         p = self.params()
         if p["mode"] not in MODES:
@@ -611,7 +616,11 @@ def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
 
 def main(args=None) -> int:
     """Entry point (`ros2 run gyro_sim simulator`, console script `gyro-sim-simulator`)."""
-    return node_main("simulator", SimulatorNode, _spin_and_run, args)
+    from .common import node_usage
+
+    usage = node_usage("ros2 run gyro_sim simulator", [(n, "(the scene's)" if d is None else d, t + (
+        " (read-only)" if ro else "")) for n, d, t, _, ro in PARAMETERS])
+    return node_main("simulator", SimulatorNode, _spin_and_run, args, usage=usage)
 
 
 if __name__ == "__main__":
