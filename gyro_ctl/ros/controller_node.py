@@ -20,7 +20,6 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from pydantic import ValidationError
-from pydantic_core import PydanticUndefined
 
 from gyro_sim.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, command_message,
                                node_topic, to_ros)
@@ -170,9 +169,9 @@ def resolve(scene, current: ControllerConfig | None, law: str | None, given: dic
 def _describe(name: str) -> ParameterDescriptor:
     law, kind, desc = LAW_PARAMS[name]
     unset = {"str": "''", "str[]": "['']"}.get(kind, "NaN")
-    default = ROS_LAWS[law].model_fields[name].default
-    if default is not None and default is not PydanticUndefined:
-        desc += f" (default {default})"
+    field = ROS_LAWS[law].model_fields[name]
+    if not field.is_required() and field.default is not None:
+        desc += f" (default {field.default})"
     return ParameterDescriptor(
         description=(f"{law}: {desc}. Shows the value in force while law is {law}; while the law in force is "
                      f"another (the parameter is not in force) it shows {unset}, and setting it is refused unless "
