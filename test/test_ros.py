@@ -186,23 +186,33 @@ def test_replay_republishes_a_bag(ros, tmp_path):
 
 
 def test_killing_the_controller_triggers_the_watchdog(ros, tmp_path):
+    """The controller drives 100 lockstep ticks (gyro/step from a start paused), is killed, and the run resumes:
+    the watchdog fires at the next tick and zeroes every current, recorded like a command. The pause makes it
+    independent of the machine's speed (before, a fast run could end before the kill)."""
     bag = tmp_path / "wd"
-    sim = ros.simulator(scene="nutation_oblate", duration=3.0, record=bag, watchdog_timeout=0.5)
+    sim = ros.simulator(scene="nutation_oblate", duration=0.5, record=bag, watchdog_timeout=0.5, start_paused=True,
+                        step_ticks=100, startup_timeout=120.0)
     ctl = ros.controller(scene="nutation_oblate")
-    t0 = time.time()
-    while not bag.exists() and time.time() - t0 < 60:
-        time.sleep(0.1)
-    time.sleep(1.5)
+    out = tmp_path / "phase1.json"
+    p1 = ros.start(PROBE, "script", str(out), "/", str(PROBE_WINDOW), json.dumps(
+        [{"wait_status": "paused at t = 0 s"}, {"call": "step"}, {"wait_status": "paused at t = 0.1 s"}]))
+    code, text = finish(p1)
+    assert code == 0 and "error" not in out.read_text(), (text, out.read_text())
     ctl.kill()
-    code, out = finish(sim)
-    assert code == 0, out
+    ctl.wait()
+    p2 = ros.start(PROBE, "script", str(tmp_path / "phase2.json"), "/", str(PROBE_WINDOW), json.dumps(
+        [{"call": "resume"}, {"wait_status": "done:"}]))
+    code, out_text = finish(sim)
+    assert code == 0, out_text
+    finish(p2)
     b = read_bag(bag)
     wd = [(t, s) for t, s in zip(b.status_t, b.status) if s.startswith("watchdog: no command")]
     assert wd, b.status
     t_fire = wd[0][0]
     after = b.t > t_fire + 1e-9
-    print(f"\n  watchdog fired at t = {t_fire:.3f} s (sim) after the controller was killed; "
+    print(f"\n  watchdog fired at t = {t_fire:.3f} s (sim) after the controller was killed at t = 0.1 s; "
           f"currents after it: max {np.max(b.current[after]):.1f} A over {after.sum()} samples")
+    assert t_fire == pytest.approx(0.1, abs=1e-9)
     assert after.sum() > 10 and np.all(b.current[after] == 0.0)
     assert rerun_bag(bag)["identical"]  # the zeroing is recorded like a command
 

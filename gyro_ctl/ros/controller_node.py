@@ -212,11 +212,13 @@ class ControllerNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         self.pending: dict[int, dict] = {}
+        self._command_class = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
         self.pub = self.create_publisher(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                          qos_profile(TOPIC_STATOR_COMMANDS))
-        self.create_subscription(message_class(TOPICS[TOPIC_IMU]), node_topic(TOPIC_IMU), lambda m: self._on(m, "imu"),
+        self.subs = {}
+        self.subs["imu"] = self.create_subscription(message_class(TOPICS[TOPIC_IMU]), node_topic(TOPIC_IMU), lambda m: self._on(m, "imu"),
                                  qos_profile(TOPIC_IMU))
-        self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT),
+        self.subs["L"] = self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT),
                                  lambda m: self._on(m, "L"), qos_profile(TOPIC_KINETIC_MOMENT))
         self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}"
                                + _expected_time_constant(self.scene, cfg))
@@ -276,12 +278,15 @@ class ControllerNode(Node):
                          q=np.array([o.w, o.x, o.y, o.z]), omega_b=np.array([w.x, w.y, w.z]),
                          stator_names=self.names, stator_axes=self.axes)
         cmds = self.law(x)
-        names = list(cmds)  # empty (law 'hold'): an empty command, which changes nothing
-        rates = [cmds[n][1] for n in names]
-        fields = command_message(0.0, names, [float(cmds[n][0]) for n in names],
-                                 None if all(r is None for r in rates) else [float(r) for r in rates])
-        out = to_ros(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), fields)
+        # the command (gyro_sim.messages.command_message's content, filled directly: this is the per-tick path)
+        out = self._command_class()
         out.header.stamp = imu.header.stamp
+        names = list(cmds)  # empty (law 'hold'): an empty command, which changes nothing
+        out.name = names
+        out.effort = [float(cmds[n][0]) for n in names]
+        rates = [cmds[n][1] for n in names]
+        if any(r is not None for r in rates):
+            out.velocity = [float(r) for r in rates]
         self.pub.publish(out)
 
 
@@ -310,9 +315,50 @@ def _same(a: Parameter, b: Parameter) -> bool:
     return va == vb or (va != va and vb != vb)
 
 
+def make_executor():
+    """rclpy's EventsExecutor (its event queue costs a fraction of the wait-set executors' per-callback work:
+    lockstep ticks/s) where the installed rclpy has it, else the SingleThreadedExecutor."""
+    try:
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    except ImportError:
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor()
+
+
 def _spin(node: ControllerNode, stop: threading.Event) -> int:
-    while not stop.is_set() and rclpy.ok():
-        rclpy.spin_once(node, timeout_sec=0.1)
+    """The states are polled while they come (a lockstep exchange: no executor wait per message, see
+    gyro_sim.ros.common.BUSY_POLL); parameters and services, and the states after a quiet spell, go through the
+    executor."""
+    import os
+    import time
+
+    from gyro_sim.ros.common import BUSY_POLL, take
+
+    executor = make_executor()
+    executor.add_node(node)
+    subs = list(node.subs.items())
+    last = next_spin = time.perf_counter()
+    try:
+        while not stop.is_set() and rclpy.ok():
+            got = False
+            for kind, sub in subs:
+                msg = take(sub)
+                if msg is not None:
+                    node._on(msg, kind)
+                    got = True
+            now = time.perf_counter()
+            if got:
+                last = now
+            if now < next_spin and now - last < BUSY_POLL:
+                os.sched_yield()
+                continue
+            executor.spin_once(timeout_sec=0.1 if now - last >= BUSY_POLL else 0.0)
+            next_spin = time.perf_counter() + 0.05
+    finally:
+        executor.shutdown()
     return 0
 
 

@@ -25,7 +25,8 @@ commands come back. A malformed or out-of-range command is refused whole, with t
 from __future__ import annotations
 
 import math
-import queue
+import os
+from collections import deque
 import sys
 import threading
 import time
@@ -34,7 +35,6 @@ from typing import Optional
 
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
@@ -44,7 +44,7 @@ from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPI
 from ..compile_watch import announce_compiles, compile_seconds
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
-from .common import message_class, node_main, parse_command, qos_profile, wait_for_matches
+from .common import BUSY_POLL, message_class, node_main, parse_command, qos_profile, take, wait_for_matches
 
 MODES = ("lockstep", "realtime", "freerun")
 #: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
@@ -54,6 +54,8 @@ SAMPLE_TOPICS = (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPI
 DEFAULT_CONTROL_PERIOD = 0.01
 DIAGNOSTICS_PERIOD = 1.0  # wall s between /diagnostics messages
 SUBSCRIBERS_REFRESH = 0.25  # wall s between looks at who subscribes to the per-sample topics
+PUMP_PERIOD = 0.05  # wall s between executor turns (services, parameters) while the loop runs
+MAX_COMMANDS_PER_TICK = 100  # commands taken at one tick (the subscription keeps the last 100)
 RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks")
 #: the node's parameters: (name, default, description, range, read-only); defaults None come from the scene
 PARAMETERS = (
@@ -88,20 +90,18 @@ def tf_available() -> bool:
 
 
 class RunControl:
-    """Pause / resume / step / reset requests from the service threads to the loop (thread-safe)."""
+    """Pause / resume / step / reset requests from the service callbacks to the loop (thread-safe)."""
 
     def __init__(self, paused: bool):
         self.lock = threading.Lock()
         self.paused = paused
         self.steps_left = 0  # ticks still to run before pausing again
         self.reset = False
-        self.changed = threading.Event()  # wakes a paused loop
 
     def request(self, **kw) -> None:
         with self.lock:
             for k, v in kw.items():
                 setattr(self, k, v)
-        self.changed.set()
 
 
 class SimulatorNode(Node):
@@ -127,7 +127,8 @@ class SimulatorNode(Node):
         if p["record"] and Path(p["record"]).exists():
             raise SceneError(f"parameter record = {p['record']!r}: already exists; give a new directory")
         self.live = {k: p[k] for k in RUNTIME_PARAMS}
-        self.commands: "queue.Queue" = queue.Queue()
+        self.commands: deque = deque()  # (message, wall time received): filled by the executor in the loop's thread
+        self.events = 0  # callbacks run (commands, services): Loop.pump runs the executor until it stops moving
         self.tf = tf_available()
         topics = [t for t in SAMPLE_TOPICS if t != TOPIC_TF or self.tf]
         if self.scene.effects.flywheel is None and self.scene.effects.damper is None:
@@ -136,7 +137,7 @@ class SimulatorNode(Node):
         self.pubs = {t: self.create_publisher(message_class(TOPICS[t]), node_topic(t), qos_profile(t)) for t in topics}
         self.classes = {t: message_class(TOPICS[t]) for t in topics}
         self._subs, self._subs_next = (), 0.0
-        self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
+        self.command_sub = self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                  self._on_command, qos_profile(TOPIC_STATOR_COMMANDS))
         self.control = RunControl(p["start_paused"])
         self.recording = bool(p["record"])
@@ -174,6 +175,7 @@ class SimulatorNode(Node):
 
     # --- services ----------------------------------------------------------------------------
     def _srv_pause(self, request, response):
+        self.events += 1
         c = self.control
         response.success = not c.paused
         response.message = (f"already paused at t = {self.t_now:.9g} s" if c.paused
@@ -182,6 +184,7 @@ class SimulatorNode(Node):
         return response
 
     def _srv_resume(self, request, response):
+        self.events += 1
         c = self.control
         response.success = c.paused
         response.message = f"resumed at t = {self.t_now:.9g} s" if c.paused else "not paused"
@@ -189,6 +192,7 @@ class SimulatorNode(Node):
         return response
 
     def _srv_step(self, request, response):
+        self.events += 1
         c = self.control
         n = int(self.live["step_ticks"])
         if not c.paused:
@@ -199,6 +203,7 @@ class SimulatorNode(Node):
         return response
 
     def _srv_reset(self, request, response):
+        self.events += 1
         if self.recording:
             response.success = False
             response.message = (f"reset: refused while recording to {self.get_parameter('record').value!r} "
@@ -210,7 +215,8 @@ class SimulatorNode(Node):
 
     # --- topics ------------------------------------------------------------------------------
     def _on_command(self, msg) -> None:
-        self.commands.put((msg, time.perf_counter()))
+        self.commands.append((msg, time.perf_counter()))
+        self.events += 1
 
     def publish(self, topic: str, fields: dict) -> None:
         self.pubs[topic].publish(to_ros(self.classes[topic], fields))
@@ -254,8 +260,8 @@ def last_sample(s: dict) -> dict:
 class Loop:
     """The simulation loop of one node (main thread); DDS callbacks and services run in an executor thread."""
 
-    def __init__(self, node: SimulatorNode, stop: threading.Event):
-        self.node, self.stop = node, stop
+    def __init__(self, node: SimulatorNode, stop: threading.Event, spin_once):
+        self.node, self.stop, self.spin_once = node, stop, spin_once
         self.p = p = node.params()
         self.mode = p["mode"]
         self.expect = bool(p["expect_controller"])
@@ -268,6 +274,7 @@ class Loop:
                                                "gyro_sim.control_period": repr(p["control_period"])},
                                         static_tf=stator_frames(node.scene))
         self.refused = 0
+        self.next_pump = 0.0
         self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
         self.new_run()
 
@@ -290,8 +297,7 @@ class Loop:
         self.prev_tick_ns = self.tick_ns = -1
         self.waiting_since: Optional[float] = None
         node.published_wall.clear()
-        while not node.commands.empty():
-            node.commands.get_nowait()
+        node.commands.clear()
         self.wall0 = self.last_cmd_wall = self.last_diag = time.perf_counter()
         self.paused_wall = 0.0  # wall s spent paused (not real time, not watchdog time)
         self.c0 = self.c_seen = compile_seconds()  # numba compile time: left out of the same
@@ -399,39 +405,62 @@ class Loop:
         j = int(np.searchsorted(t_out, ns * 1e-9))
         return any(stamp_ns(t_out[i]) == ns for i in (j - 1, j, j + 1) if 0 <= i < t_out.size)
 
+    def pump(self, timeout: float = 0.0) -> None:
+        """Run the node's ready callbacks (service calls, parameters; commands that came that way) in this thread,
+        waiting up to ``timeout`` s for the first; at most every :data:`PUMP_PERIOD` wall s unless it waits (an
+        executor turn costs ~75 µs here: more than a lockstep exchange)."""
+        now = time.perf_counter()
+        if timeout <= 0 and now < self.next_pump:
+            return
+        self.next_pump = now + PUMP_PERIOD
+        self.spin_once(timeout)
+
     def drain(self, pending: int, strict: bool) -> None:
-        """Take the commands queued now (not those that arrive meanwhile: a flood cannot stall the run)."""
-        q = self.node.commands
-        for _ in range(q.qsize()):
-            try:
-                msg, wall = q.get_nowait()
-            except queue.Empty:
-                return
+        """Take the commands that came (at most :data:`MAX_COMMANDS_PER_TICK`: a flood cannot stall the run)."""
+        self.pump()
+        q, sub = self.node.commands, self.node.command_sub
+        for _ in range(MAX_COMMANDS_PER_TICK):
+            if q:
+                msg, wall = q.popleft()
+            else:
+                msg, wall = take(sub), time.perf_counter()
+                if msg is None:
+                    return
             self.take(msg, wall, pending, strict)
 
     def wait_for(self, stamp: int, timeout: float) -> bool:
         """Lockstep: wait (≤ timeout wall s) for the command stamped ``stamp``. While waiting, the last state is
         published again every 0.5 s, so a state lost before discovery completed does not stall the loop (the
         controller answers a repeat identically)."""
-        q = self.node.commands
-        deadline = time.perf_counter() + timeout
-        resend = time.perf_counter() + 0.5
-        self.waiting_since = time.perf_counter()
+        q, sub = self.node.commands, self.node.command_sub
+        now = time.perf_counter()
+        deadline, resend, poll_until = now + timeout, now + 0.5, now + BUSY_POLL
+        self.waiting_since = now
         try:
             while not self.stop.is_set():
-                left = deadline - time.perf_counter()
+                while q:
+                    msg, wall = q.popleft()
+                    if self.take(msg, wall, stamp, True):
+                        return True
+                msg = take(sub)  # polled first: the answer of a lockstep controller comes within a millisecond
+                if msg is not None:
+                    if self.take(msg, time.perf_counter(), stamp, True):
+                        return True
+                    continue
+                self.pump()  # services and parameters meanwhile
+                now = time.perf_counter()
+                if now < poll_until:
+                    os.sched_yield()
+                    continue
+                left = deadline - now
                 if left <= 0:
                     return False
-                try:
-                    msg, wall = q.get(timeout=min(left, 0.05))
-                except queue.Empty:
+                self.spin_once(min(left, 0.05))
+                if not q:
                     if time.perf_counter() > resend and self.last_published:
                         self.node.publish_samples(self.last_published["s"], self.names)
                         resend = time.perf_counter() + 0.5
                     self.diagnostics()
-                    continue
-                if self.take(msg, wall, stamp, True):
-                    return True
             return False
         finally:
             self.waiting_since = None
@@ -480,12 +509,11 @@ class Loop:
             with c.lock:
                 if c.reset or not c.paused or c.steps_left > 0:
                     break
-                c.changed.clear()
             if not announced:
                 self.status(f"paused at t = {self.runner.sim.t:.9g} s")
                 self.diagnostics(force=True)
                 announced = True
-            c.changed.wait(0.2)
+            self.pump(0.2)
             self.diagnostics()
         held = time.perf_counter() - w0
         self.paused_wall += held
@@ -596,22 +624,20 @@ def _scene_text(scene) -> str:
 
 
 def run_node(node: SimulatorNode, stop: threading.Event) -> int:
-    """The simulation loop (main thread); DDS callbacks run in an executor thread."""
-    return Loop(node, stop).run()
+    """The simulation loop, with the node's callbacks run in the same thread (:meth:`Loop.pump`): a command
+    reaches the loop without a thread hand-over (lockstep ticks/s)."""
+    from gyro_ctl.ros.controller_node import make_executor
+
+    executor = make_executor()
+    executor.add_node(node)
+    try:
+        return Loop(node, stop, lambda timeout: executor.spin_once(timeout_sec=timeout)).run()
+    finally:
+        executor.shutdown()
 
 
 def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
-    """DDS callbacks in an executor thread, the simulation loop in this one."""
-    # (not the EventsExecutor: its spin holds the GIL while it waits, which stops this loop)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spin = threading.Thread(target=executor.spin, daemon=True)
-    spin.start()
-    try:
-        return run_node(node, stop)
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        spin.join(timeout=2.0)
+    return run_node(node, stop)
 
 
 def main(args=None) -> int:
