@@ -432,6 +432,7 @@ class BenchConfig:
     spinup_duration: Optional[float] = None  # the 20-minute spin-up (full mode): 1200 s
     averaged_scenes: tuple = AVERAGED_SCENES  # fidelity auto against full on the scenes of each averaged model
     profile: bool = True
+    ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -443,7 +444,7 @@ def quick_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
     """Under a minute: 0.2 s horizons (100 turns of the default scene's field), every tolerance."""
     return BenchConfig(mode="quick", scenes=tuple(scenes), default_horizon=0.2,
                        horizon={"spinup_thin_shell": 0.2, "spinup_solid_sphere": 0.2},
-                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3)
+                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True)
 
 
 def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
@@ -453,7 +454,7 @@ def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
                        horizon={"spinup_thin_shell": 2.0, "spinup_solid_sphere": 2.0},
                        spt_ref=3072, long_horizon_scenes=("spinup_thin_shell",), long_spt_ref=1536,
                        mode_horizon=10.0, mode_baseline_horizon=0.1, spinup_duration=1200.0,
-                       min_wall=0.3, max_reps=5)
+                       min_wall=0.3, max_reps=5, ros=True)
 
 
 # ----------------------------------------------------------------------------------------
@@ -476,6 +477,7 @@ class Results:
     profile: list = field(default_factory=list)  # dicts: what, ns
     savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
+    ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""
@@ -916,6 +918,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     if cfg.profile:
         savings(res)
         profile_kernels(res)
+    if cfg.ros:
+        from .bench_ros import ros_part
+
+        ros_part(res, quick=cfg.mode == "quick")
     res.wall_total = time.perf_counter() - w0
     write_outputs(res, Path(out))
     return res
@@ -987,7 +993,9 @@ def headline_lines(res: Results) -> list[str]:
                      f"(wall {s['wall']:.3g} s, CPU {s['cpu']:.3g} s{avg}), error ≈ {_fmt(s['error'], '.1e')} "
                      f"(L alone {_fmt(s['error_L'], '.1e')}), spin {s['spin_rev_s']:.1f} rev/s "
                      f"({100 * s['spin_fraction']:.2f} % of the field rate)")
-    return lines
+    from .bench_ros import headline as ros_headline
+
+    return lines + ros_headline(res)
 
 
 def _ours(res: Results, h: dict) -> dict:
@@ -1139,6 +1147,9 @@ def markdown(res: Results) -> str:
                     [f"{p['case']} | {p['what']} | "
                      + (f"{p['ns']:.2f} (ratio)" if p.get("unit") == "ratio" else f"{p['ns']:.4g}")
                      for p in res.profile])
+    from .bench_ros import markdown as ros_markdown
+
+    L += ros_markdown(res)
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"
@@ -1196,6 +1207,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder (default: runs/bench)")
     p.add_argument("--scenes", metavar="SCENE", nargs="+", default=list(DEFAULT_SCENES),
                    help=f"scenes of the work-precision comparison (default: {' '.join(DEFAULT_SCENES)})")
+    p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
     return p
 
 
@@ -1211,6 +1223,7 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     cfg = (quick_config if args.quick else full_config)(args.scenes)
+    cfg.ros = cfg.ros and not args.no_ros
     command = "gyro-sim bench " + " ".join(sys.argv[1:] if argv is None else list(argv))
     res = run_bench(cfg, args.out, command=command.strip())
     print()

@@ -154,3 +154,22 @@ def test_bench_main_quick(tmp_path):
     _check_outputs(tmp_path, ["spinup_thin_shell", "spinup_solid_sphere"])
     md = (tmp_path / "bench.md").read_text()
     assert "Where the time goes" in md and "ns" in md
+
+
+def test_bench_ros_part_measures_the_node_path(tmp_path):
+    """The ros part's pieces on short runs: a first run cold then warm (the warm process compiles nothing), lockstep
+    over DDS with every tick answered and its figures parsed, real time with the latency distribution."""
+    pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
+    from gyro_sim import bench_ros
+
+    cold, warm = bench_ros.first_run("free_rotor", tmp_path)[:2]
+    print(f"\n  first run of free_rotor: cold {cold['process_wall']:.2f} s (compile {cold['compile']:.2f} s), "
+          f"warm {warm['process_wall']:.2f} s")
+    assert cold["ok"] and warm["ok"] and cold["compile"] > 0 and warm["compile"] == 0
+    lk = bench_ros.lockstep("nutation_oblate", 0.2, tmp_path)
+    print(f"  lockstep: {lk['ticks_per_s']:.0f} ticks/s, rtf {lk['rtf_dds']:.2f} vs {lk['rtf_in_process']:.2f}")
+    assert lk["ok"] and lk["ticks"] == 200 and lk["ticks_per_s"] > 0 and lk["rtf_in_process"] > 0
+    rt = bench_ros.realtime("nutation_oblate", 0.2, tmp_path)
+    assert rt["ok"] and 0 <= rt["median_ms"] <= rt["p99_ms"] <= rt["max_ms"] and rt["applied"] > 0
+    md = "\n".join(bench_ros.markdown(type("R", (), {"ros": [{"part": "lockstep", **lk}, {"part": "realtime", **rt}]})()))
+    assert "ROS path" in md and "ticks/s" in md

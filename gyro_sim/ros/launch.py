@@ -32,17 +32,21 @@ def node_command(module: str, params: dict) -> list[str]:
 
 def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, duration: Optional[float] = None,
            rate_factor: float = 1.0, watchdog_timeout: float = 2.0, with_controller: bool = True,
-           domain_id: Optional[int] = None) -> int:
+           domain_id: Optional[int] = None, progress: Optional[bool] = None) -> int:
     """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends.
 
     ``scene`` is a path or a built-in name; returns the simulator's exit status. Ctrl-C is passed
-    to both nodes, which end cleanly (the bag is closed).
+    to both nodes, which end cleanly (the bag is closed). ``progress`` (default: stderr is a terminal): the
+    simulator shows a progress line.
     """
+    if progress is None:
+        progress = sys.stderr.isatty()
     if Path(scene).is_file():
         scene = str(Path(scene).resolve())
     env = ros_env(domain_id)
     sim_params = {"scene": scene, "mode": mode, "rate_factor": float(rate_factor),
-                  "watchdog_timeout": float(watchdog_timeout), "duration": float(duration or 0.0)}
+                  "watchdog_timeout": float(watchdog_timeout), "duration": float(duration or 0.0),
+                  "progress": "true" if progress else "false"}
     if record:
         sim_params["record"] = str(Path(record).resolve())
     procs = []

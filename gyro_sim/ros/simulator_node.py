@@ -77,6 +77,8 @@ PARAMETERS = (
     ("start_paused", False, "start paused at t = 0 (after publishing the initial state): gyro/step, gyro/resume go "
      "on", None, True),
     ("step_ticks", 1, "control ticks one call of gyro/step runs", (1, 1_000_000_000), False),
+    ("progress", False, "a progress line on stderr about once a wall second: simulated time, ticks/s, real-time "
+     "factor (gyro-sim run --ros sets it on a terminal)", None, True),
 )
 
 
@@ -160,9 +162,7 @@ class SimulatorNode(Node):
         self.declare_parameter(name, default, desc)
 
     def params(self) -> dict:
-        names = ("scene", "mode", "rate_factor", "duration", "record", "control_period", "expect_controller",
-                 "watchdog_timeout", "startup_timeout", "wait_for_subscribers", "start_paused", "step_ticks")
-        return {n: self.get_parameter(n).value for n in names}
+        return {n[0]: self.get_parameter(n[0]).value for n in PARAMETERS}
 
     def _on_set(self, params) -> SetParametersResult:
         # read-only and range checks are rclpy's (with their reasons); the run-time ones take effect at once
@@ -301,6 +301,7 @@ class Loop:
         self.wall0 = self.last_cmd_wall = self.last_diag = time.perf_counter()
         self.paused_wall = 0.0  # wall s spent paused (not real time, not watchdog time)
         self.c0 = self.c_seen = compile_seconds()  # numba compile time: left out of the same
+        self._next_progress = self.wall0 + 1.0
 
     def run_wall(self) -> float:
         """Wall s of the run so far, less the time paused and the time numba spent compiling (a first use)."""
@@ -572,6 +573,8 @@ class Loop:
                     break
                 self.publish_samples(rows)
                 self.diagnostics()
+                if p["progress"]:
+                    self.show_progress()
                 if self.mode == "realtime":
                     ahead = r.sim.t / node.live["rate_factor"] - self.run_wall()
                     if ahead > 0:
@@ -580,6 +583,17 @@ class Loop:
         finally:
             if self.recorder is not None:
                 self.recorder.close()
+
+    def show_progress(self, end: bool = False) -> None:
+        """``\r  t = … / T s  (… ticks/s, …x real time)`` on stderr, about once a wall second (``end``: the last)."""
+        now = time.perf_counter()
+        if not end and now < getattr(self, "_next_progress", 0.0):
+            return
+        self._next_progress = now + 1.0
+        wall, t = self.run_wall(), self.runner.sim.t
+        sys.stderr.write(f"\r  t = {t:.6g} / {self.runner.T:.6g} s  ({self.n_ticks / wall:.0f} ticks/s, "
+                         f"{t / wall:.3g}x real time)   " + ("\n" if end else ""))
+        sys.stderr.flush()
 
     def serve_controls(self) -> None:
         """Reset if asked; hold at a tick while paused."""
@@ -603,15 +617,17 @@ class Loop:
         if self.recorder is not None:
             for k, v in (("wall_time", wall), ("compile_time", compiled), ("steps", r.sim.steps), ("duration", r.sim.t),
                          ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
-                         ("latency_p99_s", float(np.percentile(lat, 99)))):
+                         ("latency_p99_s", float(np.percentile(lat, 99))), ("latency_max_s", float(np.max(lat)))):
                 self.recorder.set_custom(f"gyro_sim.{k}", v)
             if self.stop.is_set():
                 self.recorder.interrupted("signal")
         self.diagnostics(force=True)
+        if self.p["progress"]:
+            self.show_progress(end=True)
         self.status(f"done: t = {r.sim.t:g} s in {wall:.3f} s wall ({r.sim.t / wall:.1f}x real time), "
                     f"{self.n_ticks} control ticks ({self.n_ticks / wall:.1f}/s), {r.sim.steps} steps, "
                     f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
-                    f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms"
+                    f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms max {np.max(lat) * 1e3:.3f} ms"
                     + (f" (+ {compiled:.1f} s compiling the kernels, first use)" if compiled else "")
                     + (" (interrupted)" if self.stop.is_set() else ""))
         return 0
