@@ -66,3 +66,35 @@ def test_warmup_compiles_a_scene_and_then_reports_a_warm_cache(tmp_path):
     assert "already compiled" in second.stdout, second.stdout
     bad = _run_cli(["warmup", "no_such_scene"], cache)
     assert bad.returncode == 2 and bad.stderr.startswith("error:") and len(bad.stderr.splitlines()) == 1
+
+
+READ_ONLY = """
+import sys
+import numba.core.caching as caching
+
+
+def read_only(self):
+    raise PermissionError("the package directory is read-only (a system or colcon install)")
+
+
+caching.InTreeCacheLocator.ensure_cache_path = read_only  # as root every directory is writable: simulate it
+from gyro_sim.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_read_only_install_falls_back_to_the_user_cache_and_compiles_once(tmp_path):
+    """Where the package's own directory cannot take the cache (a read-only site-packages or colcon install),
+    numba uses the user's cache (~/.cache/numba): the first process compiles, the next ones load, never a compile
+    every launch. (Simulated: this suite runs as root, for whom no directory is read-only.)"""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(HOME=str(tmp_path), XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    args = ["run", "free_rotor", "--duration", "0.2", "--out", str(tmp_path), "--quiet"]
+    runs = [subprocess.run([sys.executable, "-c", READ_ONLY, *args], env=env, capture_output=True, text=True,
+                           timeout=900) for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+    cached = [p for p in tmp_path.rglob("*.nbi")]
+    print(f"\n  read-only install: {len(cached)} kernel index files in {sorted({str(p.parent) for p in cached})[:1]}")
+    assert "compiling the numba kernels" in runs[0].stderr and "compiling" not in runs[1].stderr
+    assert cached

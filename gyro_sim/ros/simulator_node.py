@@ -129,7 +129,9 @@ class SimulatorNode(Node):
         if p["record"] and Path(p["record"]).exists():
             raise SceneError(f"parameter record = {p['record']!r}: already exists; give a new directory")
         self.live = {k: p[k] for k in RUNTIME_PARAMS}
-        self.commands: deque = deque()  # (message, wall time received): filled by the executor in the loop's thread
+        # (message, wall time received): filled by the executor in the loop's thread; bounded (a flood drops the
+        # oldest, as the subscription's keep-last queue does)
+        self.commands: deque = deque(maxlen=10 * MAX_COMMANDS_PER_TICK)
         self.events = 0  # callbacks run (commands, services): Loop.pump runs the executor until it stops moving
         self.tf = tf_available()
         topics = [t for t in SAMPLE_TOPICS if t != TOPIC_TF or self.tf]
@@ -576,13 +578,21 @@ class Loop:
                 if p["progress"]:
                     self.show_progress()
                 if self.mode == "realtime":
-                    ahead = r.sim.t / node.live["rate_factor"] - self.run_wall()
-                    if ahead > 0:
-                        self.stop.wait(ahead)
+                    self.wait_wall(r.sim.t / node.live["rate_factor"] - self.run_wall())
             return self.finish()
         finally:
             if self.recorder is not None:
                 self.recorder.close()
+
+    def wait_wall(self, seconds: float) -> None:
+        """Real-time pacing: wait ``seconds`` wall in the executor, so commands arriving meanwhile are stamped
+        with their arrival (the latency measured is the controller's, not the pacing's)."""
+        end = time.perf_counter() + seconds
+        while not self.stop.is_set():
+            left = end - time.perf_counter()
+            if left <= 0:
+                return
+            self.spin_once(left)
 
     def show_progress(self, end: bool = False) -> None:
         """``\r  t = … / T s  (… ticks/s, …x real time)`` on stderr, about once a wall second (``end``: the last)."""
