@@ -224,12 +224,15 @@ def clock_message(t: float) -> dict:
 
 
 def state_messages(t: float, L: Any, q_wxyz: Any, omega_b: Any, euler: Any, torque: Any,
-                   names: Sequence[str], current: Any, rate: Any, phase: Any) -> dict[str, dict]:
+                   names: Sequence[str], current: Any, rate: Any, phase: Any,
+                   imu_covariance: Optional[tuple] = None) -> dict[str, dict]:
     """The messages of one output sample at simulation time ``t`` (s): topic → fields.
 
     L, torque: case frame (N·m·s, N·m); q_wxyz: attitude body → case as (w, x, y, z);
     omega_b: body frame (rad/s); euler: (ψ, θ, φ) rad; names/current/rate/phase: per stator
-    (A, rad/s signed, rad). Topics in :data:`STATE_TOPICS` order (``/clock`` first).
+    (A, rad/s signed, rad). Topics in :data:`STATE_TOPICS` order (``/clock`` first). ``imu_covariance``:
+    (orientation, angular velocity) covariances of /gyro/imu, row-major 3x3 (rad², (rad/s)²), where the state
+    carries injected noise (gyro_sim.faults); default zeros = unknown.
     """
     time = _time(t)
     q = _floats(q_wxyz, "q_wxyz")
@@ -242,9 +245,9 @@ def state_messages(t: float, L: Any, q_wxyz: Any, omega_b: Any, euler: Any, torq
         TOPIC_IMU: {
             "header": _header(dict(time), FRAME_ROTOR),
             "orientation": {"x": x, "y": y, "z": z, "w": w},
-            "orientation_covariance": list(_UNKNOWN_COV),
+            "orientation_covariance": list(imu_covariance[0]) if imu_covariance else list(_UNKNOWN_COV),
             "angular_velocity": {"x": wx, "y": wy, "z": wz},
-            "angular_velocity_covariance": list(_UNKNOWN_COV),
+            "angular_velocity_covariance": list(imu_covariance[1]) if imu_covariance else list(_UNKNOWN_COV),
             "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
             "linear_acceleration_covariance": list(_NOT_PROVIDED_COV),
         },

@@ -256,18 +256,26 @@ class Simulator:
         A current step makes a field step ΔB; each eddy mode answers it instantly with its
         high-frequency limit (ĝ → −1), e_n → e_n − ΔB_b (:meth:`_field_step`).
         """
-        if current is not None:
-            if not (math.isfinite(current) and current >= 0):
+        self.set_stators({k: (current, rate)})
+
+    def set_stators(self, commands: dict) -> None:
+        """Command several stators at once, ``{k: (current A | None, rate rad/s | None)}``: one field step for all
+        the current changes (the result does not depend on the order the stators are named in)."""
+        for k, (current, rate) in commands.items():
+            if current is not None and not (math.isfinite(current) and current >= 0):
                 raise ValueError(f"stator {self.stator_names[k]!r}: current = {current}: must be finite and ≥ 0 A")
-            if current != self.current[k]:
-                before = self.field_now()
-                self.current[k] = current
-                self._field_step(before, self.field_now())
-        if rate is not None:
-            if not math.isfinite(rate):
+            if rate is not None and not math.isfinite(rate):
                 raise ValueError(f"stator {self.stator_names[k]!r}: rate = {rate}: must be finite (rad/s)")
-            self.rate[k] = rate
-            self._nu_max = max(self._nu_max, abs(rate))
+        changed = {k: c for k, (c, _) in commands.items() if c is not None and c != self.current[k]}
+        if changed:
+            before = self.field_now()
+            for k, c in changed.items():
+                self.current[k] = c
+            self._field_step(before, self.field_now())
+        for k, (_, rate) in commands.items():
+            if rate is not None:
+                self.rate[k] = rate
+                self._nu_max = max(self._nu_max, abs(rate))
 
     # --- fields ----------------------------------------------------------------------------
     def field_now(self) -> np.ndarray:
@@ -614,10 +622,10 @@ class Runner:
 
     def apply_commands(self, commands: dict) -> None:
         """Apply ``{stator name: (current A, rate rad/s)}`` now (unknown names raise ValueError)."""
-        for name, (current, rate) in commands.items():
+        for name in commands:
             if name not in self.sim.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
-            self.sim.set_stator(self.sim.stator_names.index(name), current=current, rate=rate)
+        self.sim.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))

@@ -47,6 +47,7 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
     counts = {t: 0 for t in topics}
     texts = []
     stamps = []
+    imu: dict = {}
 
     def cb(topic):
         def f(msg):
@@ -55,6 +56,10 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
                 texts.append(msg.data)
             elif hasattr(msg, "header"):
                 stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+            if hasattr(msg, "angular_velocity_covariance") and not imu:  # the first /gyro/imu's
+                imu.update(orientation_covariance=list(msg.orientation_covariance),
+                           angular_velocity_covariance=list(msg.angular_velocity_covariance),
+                           angular_velocity=[msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z])
         return f
 
     for t in topics:
@@ -73,7 +78,7 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
     while time.time() < end and not complete():
         rclpy.spin_once(node, timeout_sec=0.05)
     with open(out, "w") as f:
-        json.dump({"counts": counts, "status": texts, "stamps": stamps}, f)
+        json.dump({"counts": counts, "status": texts, "stamps": stamps, "imu": imu}, f)
     node.destroy_node()
 
 

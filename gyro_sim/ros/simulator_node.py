@@ -42,6 +42,7 @@ from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPI
                         TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, diagnostics_message, effects_message,
                         node_topic, scene_message, stamp_ns, state_messages, status_message, to_ros)
 from ..compile_watch import announce_compiles, compile_seconds
+from ..faults import FaultConfig, Faults
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
 from .common import BUSY_POLL, message_class, node_main, parse_command, qos_profile, take, wait_for_matches
@@ -79,6 +80,20 @@ PARAMETERS = (
     ("step_ticks", 1, "control ticks one call of gyro/step runs", (1, 1_000_000_000), False),
     ("progress", False, "a progress line on stderr about once a wall second: simulated time, ticks/s, real-time "
      "factor (gyro-sim run --ros sets it on a terminal)", None, True),
+    # fault injection (gyro_sim.faults): off by default, reproducible from fault_seed
+    ("fault_seed", 0, "seed of the injected faults (commands and sensors draw from two streams of it)",
+     (0, 2**31 - 1), True),
+    ("command_drop", 0.0, "fraction of commands dropped (never applied: the previous command stays)", (0.0, 1.0), True),
+    ("command_corrupt", 0.0, "fraction of commands whose currents are each scaled by a factor uniform in [0, 2)",
+     (0.0, 1.0), True),
+    ("command_delay", 0, "control ticks a command waits before it is applied", (0, 1_000_000), True),
+    ("current_quantum", 0.0, "A: applied currents rounded to multiples of it (0 = off)", (0.0, 1e6), True),
+    ("noise_omega", 0.0, "rad/s: std of the Gaussian noise on the published Ω_b (gyro/imu, each body component)",
+     (0.0, 1e9), True),
+    ("noise_attitude", 0.0, "rad: std of each component of a random error rotation of the published attitude",
+     (0.0, 10.0), True),
+    ("noise_L", 0.0, "N·m·s: std of the Gaussian noise on the published L (each case component)", (0.0, 1e9), True),
+    ("bias_omega", [0.0, 0.0, 0.0], "rad/s: bias added to the published Ω_b (body frame x, y, z)", None, True),
 )
 
 
@@ -129,6 +144,14 @@ class SimulatorNode(Node):
         if p["record"] and Path(p["record"]).exists():
             raise SceneError(f"parameter record = {p['record']!r}: already exists; give a new directory")
         self.live = {k: p[k] for k in RUNTIME_PARAMS}
+        try:
+            self.fault_config = FaultConfig(
+                seed=p["fault_seed"], command_drop=p["command_drop"], command_corrupt=p["command_corrupt"],
+                command_delay=p["command_delay"], current_quantum=p["current_quantum"], noise_omega=p["noise_omega"],
+                noise_attitude=p["noise_attitude"], noise_L=p["noise_L"], bias_omega=tuple(p["bias_omega"]))
+        except ValueError as e:
+            raise SceneError(f"parameter {e}") from None
+        self.faults: Optional[Faults] = None  # made per run (Loop.new_run): the same faults after a reset
         # (message, wall time received): filled by the executor in the loop's thread; bounded (a flood drops the
         # oldest, as the subscription's keep-last queue does)
         self.commands: deque = deque(maxlen=10 * MAX_COMMANDS_PER_TICK)
@@ -244,8 +267,13 @@ class SimulatorNode(Node):
         topics = self.subscribed()
         for i in range(s["t"].size):
             if topics:
-                msgs = state_messages(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],
-                                      s["torque"][i], names, s["current"][i], s["rate"][i], s["phase"][i])
+                L, q, w = s["L"][i], s["q"][i], s["omega_b"][i]
+                cov = None
+                if self.faults is not None and self.fault_config.sensors_active:
+                    L, q, w = self.faults.state(L, q, w)  # what a controller on a bench would read
+                    cov = self.faults.covariances()
+                msgs = state_messages(s["t"][i], L, q, w, s["euler"][i], s["torque"][i], names, s["current"][i],
+                                      s["rate"][i], s["phase"][i], imu_covariance=cov)
                 if s["effects"] and TOPIC_EFFECTS in topics:
                     msgs[TOPIC_EFFECTS] = effects_message(s["t"][i], {k: v[i] for k, v in s["effects"].items()})
                 for topic in topics:
@@ -273,7 +301,8 @@ class Loop:
 
             self.recorder = BagRecorder(p["record"], scene_text(node.scene), node.scene.name,
                                         extra={"gyro_sim.mode": p["mode"],
-                                               "gyro_sim.control_period": repr(p["control_period"])},
+                                               "gyro_sim.control_period": repr(p["control_period"]),
+                                               **(node.fault_config.as_custom() if node.fault_config.active else {})},
                                         static_tf=stator_frames(node.scene))
         self.refused = 0
         self.next_pump = 0.0
@@ -286,6 +315,7 @@ class Loop:
         self.runner = Runner(node.scene, self.p["duration"] or None, attitude=True,
                              control_period=self.p["control_period"])
         self.names = list(self.runner.sim.stator_names)
+        node.faults = Faults(node.fault_config, len(self.names)) if node.fault_config.active else None
         self.latest = None  # latest valid command (names, current, rate, stamp_ns)
         self.have_cmd = False
         self.watchdog_fired = False
@@ -483,13 +513,16 @@ class Loop:
         strict = self.mode == "lockstep" and self.expect
         if strict and not self.watchdog_fired:
             timeout = wd if self.have_cmd else self.node.live["startup_timeout"]
-            if self.wait_for(now, timeout if timeout > 0 else math.inf):
-                self.apply(self.latest)
+            if not self.wait_for(now, timeout if timeout > 0 else math.inf):
+                self.latest = None
         else:
             self.drain(now, strict)
-            if self.latest is not None:
-                self.apply(self.latest)
-        self.latest = None  # applied, or stale (another tick's)
+        cmd, self.latest = self.latest, None  # (the next tick takes only what comes for it)
+        faults = self.node.faults
+        if faults is not None and faults.cfg.commands_active:
+            cmd = faults.command(cmd)  # dropped, corrupted, delayed, quantised (gyro_sim.faults)
+        if cmd is not None:
+            self.apply(cmd)
         compiled = compile_seconds() - self.c_seen  # compiling is no controller's silence
         if compiled:
             self.c_seen += compiled
