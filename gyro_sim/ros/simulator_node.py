@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections import deque
 import sys
 import threading
@@ -405,7 +406,9 @@ class Loop:
         """
         cmd, why = parse_command(msg, self.names)
         if cmd is None:
-            self.report_refusal(why, why, wall)
+            # one report a second per kind of refusal, whatever finite values are in it (a sender of changing bad
+            # values must not flood the status topic either); NaN and inf stay kinds of their own
+            self.report_refusal(re.sub(r"-?\b\d[\d.]*(?:e[-+]?\d+)?\b", "#", why), why, wall)
             return False
         ns = cmd[3]
         if strict and ns != pending and not (self.watchdog_fired and self.published(ns, self.fired_ns)):
@@ -530,7 +533,9 @@ class Loop:
         if self.expect and wd > 0 and not self.watchdog_fired and time.perf_counter() - self.last_cmd_wall > wd:
             self.watchdog_fired, self.fired_ns = True, now
             self.apply((self.names, [0.0] * len(self.names), None, None))  # recorded like any command
-            self.status(f"watchdog: no command for {wd:g} s; all stator currents set to 0 A", warn=True)
+            waited = (f"no command for {wd:g} s" if self.have_cmd else
+                      f"no command since the start (startup_timeout {self.node.live['startup_timeout']:g} s)")
+            self.status(f"watchdog: {waited}; all stator currents set to 0 A", warn=True)
             self.diagnostics(force=True)
 
     # --- pause, step, reset --------------------------------------------------------------------
