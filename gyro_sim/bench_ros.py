@@ -78,6 +78,24 @@ def first_run(scene: str, tmp: Path) -> list[dict]:
     return rows
 
 
+def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
+    """The scene's controller node and the simulator node (``sim_args``: more ``-p name:=value``) as processes on a
+    free domain; the simulator waits for the controller's two subscriptions. Returns the simulator's result."""
+    env = _env()
+    ctl = subprocess.Popen([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
+                            f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        return subprocess.run([sys.executable, "-m", "gyro_sim.ros.simulator_node", "--ros-args", "-p",
+                               f"scene:={scene}", "-p", "wait_for_subscribers:=2", *sim_args],
+                              env=env, capture_output=True, text=True, timeout=900)
+    finally:
+        ctl.send_signal(2)
+        try:
+            ctl.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            ctl.kill()
+
+
 def lockstep(scene: str, duration: float, tmp: Path) -> dict:
     """The two nodes over DDS in lockstep against the same scene in-process (warm caches)."""
     from .scene import load_scene
@@ -88,19 +106,7 @@ def lockstep(scene: str, duration: float, tmp: Path) -> dict:
     w0 = time.perf_counter()
     r = run(sc, duration=duration)
     wall_in = time.perf_counter() - w0
-    env = _env()
-    ctl = subprocess.Popen([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
-                            f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        sim = subprocess.run([sys.executable, "-m", "gyro_sim.ros.simulator_node", "--ros-args", "-p", f"scene:={scene}",
-                              "-p", f"duration:={float(duration)!r}", "-p", "wait_for_subscribers:=2"],
-                             env=env, capture_output=True, text=True, timeout=900)  # (the controller's two)
-    finally:
-        ctl.send_signal(2)
-        try:
-            ctl.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            ctl.kill()
+    sim = closed_loop(scene, ["-p", f"duration:={float(duration)!r}"])
     done = [line for line in (sim.stdout + sim.stderr).splitlines() if "done:" in line]
     line = done[-1] if done else ""
     ticks = int(round(duration / (sc.controller.period or 1.0 / sc.output.rate))) if sc.controller else 0
@@ -116,21 +122,9 @@ def realtime(scene: str, duration: float, tmp: Path) -> dict:
     """Real time ×1 with the scene's controller: the command latency distribution the simulator measured."""
     from .recording import bag_info
 
-    env = _env()
     bag = tmp / "rt_bag"
-    ctl = subprocess.Popen([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
-                            f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        sim = subprocess.run([sys.executable, "-m", "gyro_sim.ros.simulator_node", "--ros-args", "-p", f"scene:={scene}",
-                              "-p", "mode:=realtime", "-p", f"duration:={float(duration)!r}", "-p", f"record:={bag}",
-                              "-p", "wait_for_subscribers:=2", "-p", "watchdog_timeout:=0.0"],
-                             env=env, capture_output=True, text=True, timeout=900)
-    finally:
-        ctl.send_signal(2)
-        try:
-            ctl.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            ctl.kill()
+    sim = closed_loop(scene, ["-p", "mode:=realtime", "-p", f"duration:={float(duration)!r}", "-p", f"record:={bag}",
+                              "-p", "watchdog_timeout:=0.0"])
     custom = bag_info(bag)["custom"] if bag.exists() else {}
     from .recording import read_bag
 
