@@ -101,5 +101,7 @@ setup(
             'gyro-sim-simulator = gyro_sim.ros.simulator_node:main',
             'gyro-ctl-controller = gyro_ctl.ros.controller_node:main',
         ],
+        # the gyro_bench fixture for a user's own tests of a controller (gyro_sim/testing.py)
+        'pytest11': ['gyro_sim = gyro_sim.testing'],
     },
 )

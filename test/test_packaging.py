@@ -362,6 +362,15 @@ def test_manifest_declares_every_import():
     pkg = manifest(ROOT / "package.xml")
     pkg.validate()
     modules = imported_modules("gyro_sim") | imported_modules("gyro_ctl") | imported_modules("launch")
+    # pytest: imported only by gyro_sim/testing.py, the pytest plugin (entry point pytest11), which runs inside
+    # pytest alone: a test dependency of the package, not a run dependency
+    plugin = ROOT / "gyro_sim" / "testing.py"
+    for path in (ROOT / "gyro_sim").rglob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        imports = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        assert path == plugin or "pytest" not in imports, f"{path.name} imports pytest"
+    assert "python3-pytest" in names(pkg.test_depends)
+    modules -= {"pytest"}
     assert not check_declared(ROOT / "package.xml", modules | message_packages(), names(pkg.exec_depends))
 
 

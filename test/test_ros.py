@@ -3,13 +3,11 @@
 Each test gets its own ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (DDS stays on this
 machine); every process it starts is ended at teardown, also when the test fails.
 """
-import itertools
 import json
 import math
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -23,36 +21,13 @@ pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are
 import gyro_sim  # noqa: E402
 from gyro_sim.recording import bag_info, read_bag  # noqa: E402
 from gyro_sim.rerun import rerun_bag  # noqa: E402
+from gyro_sim.testing import unique_domain  # noqa: E402  (a free ROS_DOMAIN_ID; the gyro_bench fixture uses it too)
 
 pytestmark = pytest.mark.ros
 PROBE = str(Path(__file__).with_name("ros_probe.py"))
 ROOT = Path(__file__).resolve().parents[1]
 PROBE_WINDOW = 150  # s: a probe listens at most this long (it ends as soon as it has what it waits for)
-_domains = itertools.count((os.getpid() * 7) % 101)
-_used: set = set()
-
-
-def _domain_is_free(d: int) -> bool:
-    """No DDS participant of domain ``d`` on this machine: participant 0's discovery port (Fast DDS and the
-    RTPS default: 7400 + 250 d + 10) can be bound."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        try:
-            s.bind(("127.0.0.1", 7410 + 250 * d))
-            return True
-        except OSError:
-            return False
-
-
-def unique_domain() -> int:
-    """A ROS_DOMAIN_ID for one test: 1–101 (ROS's advice on Linux: their ports stay below the ephemeral
-    range 32768–60999, so no passing socket takes one), not used by this session and not in use on the
-    machine."""
-    for _ in range(101):
-        d = 1 + next(_domains) % 101
-        if d not in _used and _domain_is_free(d):
-            _used.add(d)
-            return d
-    raise RuntimeError("no free ROS domain id in 1-101")
+CONTROLLER = [sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args"]
 
 
 class Procs:
@@ -119,47 +94,47 @@ def wait_ready(out: Path, timeout: float = 120.0) -> None:
     time.sleep(0.5)
 
 
-def done_figures(status: list) -> dict:
-    """Figures of the simulator's final status line."""
-    line = [s for s in status if s.startswith("done:")][-1]
-    f = {"ticks_per_s": float(re.search(r"control ticks \(([\d.]+)/s\)", line).group(1))}
-    m = re.search(r"median ([\d.na]+) ms p99 ([\d.na]+) ms", line)
-    f["latency_median_ms"], f["latency_p99_ms"] = float(m.group(1)), float(m.group(2))
-    return f
+def closed_loop(bench, scene: str, duration: float, **kw):
+    """The simulator and controller nodes over DDS in lockstep through the gyro_bench kit (gyro_sim.testing),
+    recorded to a bag; (the BenchRun, the in-process run of the same scene)."""
+    run = bench.run(scene, controller=CONTROLLER + ["-p", f"scene:={scene}"], duration=duration, **kw)
+    return run, gyro_sim.run(gyro_sim.load_scene(scene), duration=duration)
 
 
-def closed_loop(ros, bag: Path, scene: str, duration: float):
-    """The simulator and controller nodes over DDS in lockstep, recorded to ``bag``; (the bag's data, the
-    in-process run of the same scene)."""
-    sim = ros.simulator(scene=scene, duration=duration, record=bag)
-    ros.controller(scene=scene)
-    code, out = finish(sim)
-    assert code == 0, out
-    return read_bag(bag), gyro_sim.run(gyro_sim.load_scene(scene), duration=duration)
+def _commands(commands) -> list:
+    """(t, {stator: (current, rate)}) of a command list (the order of the names aside)."""
+    return [(t, {n: (c[i] if c else None, r[i] if r else None) for i, n in enumerate(nm)}) for t, nm, c, r in commands]
 
 
-def test_lockstep_closed_loop_over_dds_equals_in_process(ros, tmp_path):
-    """ψ-switching over DDS in lockstep damps the nutation and gives the in-process run's numbers, bit for bit."""
-    bag = tmp_path / "lock"
-    b, r = closed_loop(ros, bag, "nutation_oblate", 1.0)
-    for k in ("L", "q", "omega_b", "torque", "current"):
-        a, c = getattr(r, k), getattr(b, k)
-        assert a.shape == c.shape and np.array_equal(a, c), f"{k}: max |Δ| {np.max(np.abs(a - c))}"
+def test_lockstep_closed_loop_over_dds_equals_in_process(gyro_bench):
+    """ψ-switching over DDS in lockstep damps the nutation and gives the in-process run's numbers, bit for bit:
+    the kit's RunResult (from the bag) equals gyro_sim.run's, every array, the sample times included."""
+    run, r = closed_loop(gyro_bench, "nutation_oblate", 1.0)
+    k = run.result
+    for name in ("t", "L", "q", "omega_b", "torque", "energy", "current", "field_rate", "field_phase", "euler"):
+        a, c = getattr(r, name), getattr(k, name)
+        assert a.shape == c.shape and np.array_equal(a, c), f"{name}: max |Δ| {np.max(np.abs(a - c))}"
+    assert k.stator_names == r.stator_names
+    assert _commands(k.commands) == _commands(r.commands)
+    b = run.data
     assert np.all(np.diff(b.t_ns) > 0)
     th0, th1 = np.degrees(b.euler[0, 1]), np.degrees(b.euler[-1, 1])
-    f = done_figures(b.status)
+    f = run.figures
     print(f"\n  lockstep over DDS: θ {th0:.2f}° → {th1:.3f}° in 1 s; {len(b.t)} samples identical to the in-process "
           f"run (max |Δ| = 0); {f['ticks_per_s']:.0f} closed-loop ticks/s; "
           f"command round trip median {f['latency_median_ms']:.2f} ms, p99 {f['latency_p99_ms']:.2f} ms")
-    assert th1 < 0.5
-    rep = rerun_bag(bag)
+    run.assert_theta_below(math.radians(0.5), after=1.0)
+    run.assert_no_refusals()
+    run.assert_watchdog_never_fired()
+    rep = rerun_bag(run.bag)
     assert rep["identical"], rep
 
 
-def test_spinup_over_dds_equals_in_process(ros, tmp_path):
-    b, r = closed_loop(ros, tmp_path / "spin", "spinup_thin_shell", 4.0)
+def test_spinup_over_dds_equals_in_process(gyro_bench):
+    run, r = closed_loop(gyro_bench, "spinup_thin_shell", 4.0)
+    b = run.data
     assert np.array_equal(b.L, r.L) and np.array_equal(b.q, r.q)
-    assert b.omega_b[-1, 2] > 20 * max(b.omega_b[1, 2], 1.0)
+    run.assert_spin_reached(20 * max(b.omega_b[1, 2], 1.0), by=4.0)
     print(f"\n  spin-up over DDS: Ω3 {b.omega_b[0, 2]:.2f} → {b.omega_b[-1, 2]:.2f} rad/s, identical to in-process")
 
 
@@ -277,7 +252,7 @@ def test_bad_parameters_are_refused(ros, which, params, fragment):
     assert code == 2 and fragment in out
 
 
-def test_realtime_mode_paces_and_measures_latency(ros, tmp_path):
+def test_realtime_mode_paces_and_measures_latency(gyro_bench, tmp_path):
     """Real time ×1 at a 200 Hz control rate: paced to the wall clock, the controller's commands applied at
     ticks only, at most one a tick, with the law's values, and their latency measured.
 
@@ -291,15 +266,12 @@ def test_realtime_mode_paces_and_measures_latency(ros, tmp_path):
     text = (ROOT / "config" / "nutation_oblate.yaml").read_text()
     assert "period: 0.001" in text
     scene.write_text(text.replace("period: 0.001", f"period: {period}"))
-    bag = tmp_path / "rt"
-    sim = ros.simulator(scene=str(scene), mode="realtime", duration=2.0, record=bag, wait_for_subscribers=2,
-                        startup_timeout=120.0, watchdog_timeout=0.0)  # (the watchdog's zeroing: its own test)
-    ros.controller(scene=str(scene))
-    code, out = finish(sim)
-    assert code == 0, out
-    b = read_bag(bag)
-    f = done_figures(b.status)
-    run_wall = float(bag_info(bag)["custom"]["gyro_sim.wall_time"])
+    # the kit raises ControllerError if no controller command was applied at all
+    run = gyro_bench.run(str(scene), controller=CONTROLLER + ["-p", f"scene:={scene}"], mode="realtime",
+                         duration=2.0, wait_for_subscribers=2, startup_timeout=120.0,
+                         watchdog_timeout=0.0)  # (the watchdog's zeroing: its own test)
+    b, f = run.data, run.figures
+    run_wall = float(bag_info(run.bag)["custom"]["gyro_sim.wall_time"])
     ticks = int(round(2.0 / period))
     assert len(b.command_t) > 0, "no controller command was applied"
     print(f"\n  real time ×1, 200 Hz control: 2 s simulated in {run_wall:.2f} s wall; command latency median "
