@@ -141,6 +141,39 @@ def test_a_user_test_suite_runs_the_controller_with_the_installed_fixture(tmp_pa
     assert not (suite / ".pytest_cache").exists()
 
 
+EXAMPLES_TEST = '''\
+"""The example controllers, tested through the installed fixture as a user's own suite would."""
+import math
+import sys
+
+EXAMPLES = {examples!r}
+
+
+def test_spinup_example(gyro_bench):
+    ctl = [sys.executable, EXAMPLES + "/spinup_controller.py", "--ros-args", "-p", "target_spin:=1500.0"]
+    run = gyro_bench.run("spinup_thin_shell", controller=ctl, duration=2.0)
+    run.assert_spin_reached(20.0, by=2.0)
+    run.assert_no_refusals()
+    run.assert_watchdog_never_fired()
+
+
+def test_psi_switching_example(gyro_bench):
+    run = gyro_bench.run("nutation_oblate", controller=[sys.executable, EXAMPLES + "/psi_switching_controller.py"],
+                         duration=1.0)
+    run.assert_theta_below(math.radians(0.5), after=0.9)
+    run.assert_no_refusals()
+'''
+
+
+def test_the_examples_through_the_kit_in_a_user_suite(tmp_path_factory):
+    """Each example controller (examples/, plain rclpy) tested the way a user tests theirs: a suite outside the repo
+    that imports nothing but the installed fixture."""
+    suite = tmp_path_factory.mktemp("user_examples_suite")
+    p = run_user_suite(suite, {"test_examples_kit.py": EXAMPLES_TEST.format(examples=str(ROOT / "examples"))})
+    print("\n  " + "\n  ".join(p.stdout.strip().splitlines()[-2:]))
+    assert p.returncode == 0 and "2 passed" in p.stdout, p.stdout + p.stderr
+
+
 # --- the kit's errors -------------------------------------------------------------------------------
 
 #: a controller that starts and never subscribes
