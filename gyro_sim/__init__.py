@@ -9,8 +9,21 @@ The pure core (this package minus ``gyro_sim.ros``) never imports rclpy. In a no
 """
 __version__ = "0.1.0"
 
-from .scene import Scene, SceneError, builtin_scenes, load_scene, scene_from_dict  # noqa: E402
-from .simulate import RunResult, Simulator, run  # noqa: E402
+#: public names → the module that holds them, imported on first use (PEP 562): `import gyro_sim` (and the pytest
+#: plugin gyro_sim.testing, loaded in every pytest session) costs no numba/SciPy import until a run needs it
+_LAZY = {"Scene": "scene", "SceneError": "scene", "builtin_scenes": "scene", "load_scene": "scene",
+         "scene_from_dict": "scene", "RunResult": "simulate", "Simulator": "simulate", "run": "simulate"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'gyro_sim' has no attribute {name!r}")
+
 
 __all__ = ["Scene", "SceneError", "builtin_scenes", "load_scene", "scene_from_dict", "RunResult", "Simulator",
            "run", "__version__"]
