@@ -315,19 +315,6 @@ def _same(a: Parameter, b: Parameter) -> bool:
     return va == vb or (va != va and vb != vb)
 
 
-def make_executor():
-    """rclpy's EventsExecutor (its event queue costs a fraction of the wait-set executors' per-callback work:
-    lockstep ticks/s) where the installed rclpy has it, else the SingleThreadedExecutor."""
-    try:
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor()
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-
-        return SingleThreadedExecutor()
-
-
 def _spin(node: ControllerNode, stop: threading.Event) -> int:
     """The states are polled while they come (a lockstep exchange: no executor wait per message, see
     gyro_sim.ros.common.BUSY_POLL); parameters and services, and the states after a quiet spell, go through the
@@ -335,7 +322,7 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
     import os
     import time
 
-    from gyro_sim.ros.common import BUSY_POLL, take
+    from gyro_sim.ros.common import BUSY_POLL, make_executor, take
 
     executor = make_executor()
     executor.add_node(node)

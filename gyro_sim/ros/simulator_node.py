@@ -46,7 +46,8 @@ from ..compile_watch import announce_compiles, compile_seconds
 from ..faults import FaultConfig, Faults
 from ..scene import SceneError, load_scene
 from ..simulate import Runner
-from .common import BUSY_POLL, message_class, node_main, parse_command, qos_profile, take, wait_for_matches
+from .common import (BUSY_POLL, make_executor, message_class, node_main, parse_command, qos_profile, take,
+                     wait_for_matches)
 
 MODES = ("lockstep", "realtime", "freerun")
 #: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
@@ -690,8 +691,6 @@ def _scene_text(scene) -> str:
 def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     """The simulation loop, with the node's callbacks run in the same thread (:meth:`Loop.pump`): a command
     reaches the loop without a thread hand-over (lockstep ticks/s)."""
-    from gyro_ctl.ros.controller_node import make_executor
-
     executor = make_executor()
     executor.add_node(node)
     try:
