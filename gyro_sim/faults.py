@@ -13,8 +13,9 @@ What a bench would do to a controller, reproducibly from one seed and off by def
   angular velocity diag(σ²) (a bias is systematic: not in a covariance).
 
 The simulation itself is not noisy: bags record the true state and the commands as applied (after drop,
-corruption, delay, quantisation), so a bag re-runs bit for bit. Commands and sensors draw from two streams of
-one seed (``fault_seed``), so the same seed gives the same faults whatever the other stream does.
+corruption, delay, quantisation), so a bag re-runs bit for bit. Commands draw from a stream of the seed
+(``fault_seed``), a fixed number of draws per tick; the sensor noise of a state is a function of (seed, stamp).
+The same seed gives the same faults, whatever the subscribers or the machine's timing.
 """
 from __future__ import annotations
 
@@ -85,9 +86,7 @@ class Faults:
     def __init__(self, cfg: FaultConfig, n_stators: int = 3):
         self.cfg = cfg
         self.n = max(int(n_stators), 1)
-        cmd_seq, sensor_seq = np.random.SeedSequence(int(cfg.seed)).spawn(2)
-        self.rng_cmd = np.random.default_rng(cmd_seq)
-        self.rng_sensor = np.random.default_rng(sensor_seq)
+        self.rng_cmd = np.random.default_rng([int(cfg.seed), 1])  # one draw per tick (sensors: per stamp, state())
         self.fifo: deque = deque()
         self.dropped = self.corrupted = 0
 
@@ -112,10 +111,12 @@ class Faults:
             return self.fifo.popleft() if len(self.fifo) > c.command_delay else None
         return cmd
 
-    def state(self, L: np.ndarray, q: np.ndarray, omega_b: np.ndarray) -> tuple:
-        """Noisy copies (L case N·m·s, q = (w, x, y, z) body → case, Ω_b rad/s) of one published state."""
+    def state(self, L: np.ndarray, q: np.ndarray, omega_b: np.ndarray, stamp: int) -> tuple:
+        """Noisy copies (L case N·m·s, q = (w, x, y, z) body → case, Ω_b rad/s) of the state published with
+        ``stamp`` (ns). The noise is a function of (seed, stamp): a state published again (while lockstep waits)
+        carries the same noise, and who subscribes, or how often a state is repeated, changes nothing."""
         c = self.cfg
-        r = self.rng_sensor
+        r = np.random.default_rng([int(c.seed), 2, int(stamp)])
         nL, na, nw = r.standard_normal(3), r.standard_normal(3), r.standard_normal(3)
         L = np.asarray(L, float) + c.noise_L * nL
         omega_b = np.asarray(omega_b, float) + c.noise_omega * nw + np.asarray(c.bias_omega, float)

@@ -19,7 +19,7 @@ def test_off_by_default_changes_nothing():
     assert not cfg.active
     f, out = run_commands(cfg, 100)
     assert [c[3] for c in out] == list(range(100)) and all(c[1] == CMD[1] for c in out)
-    L, q, w = f.state(np.array([1.0, 2, 3]), np.array([1.0, 0, 0, 0]), np.array([4.0, 5, 6]))
+    L, q, w = f.state(np.array([1.0, 2, 3]), np.array([1.0, 0, 0, 0]), np.array([4.0, 5, 6]), 0)
     assert np.array_equal(L, [1, 2, 3]) and np.array_equal(q, [1, 0, 0, 0]) and np.array_equal(w, [4, 5, 6])
 
 
@@ -59,7 +59,9 @@ def test_sensor_noise_and_bias_statistics():
     f = Faults(cfg)
     n = 4000
     L0, q0, w0 = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.0, 0.0, 100.0])
-    s = [f.state(L0, q0, w0) for _ in range(n)]
+    s = [f.state(L0, q0, w0, k * 1_000_000) for k in range(n)]
+    again = f.state(L0, q0, w0, 5 * 1_000_000)  # a state published again: the same noise
+    assert all(np.array_equal(a, b) for a, b in zip(again, s[5]))
     dw = np.array([x[2] for x in s]) - w0
     dL = np.array([x[0] for x in s]) - L0
     ang = np.array([2 * math.acos(min(1.0, abs(x[1][0]))) for x in s])

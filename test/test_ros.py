@@ -185,9 +185,12 @@ def test_killing_the_controller_triggers_the_watchdog(ros, tmp_path):
     assert wd, b.status
     t_fire = wd[0][0]
     after = b.t > t_fire + 1e-9
-    print(f"\n  watchdog fired at t = {t_fire:.3f} s (sim) after the controller was killed at t = 0.1 s; "
+    print(f"\n  watchdog fired at t = {t_fire:.3f} s (sim) after the controller was killed, paused at t = 0.1 s; "
           f"currents after it: max {np.max(b.current[after]):.1f} A over {after.sum()} samples")
-    assert t_fire == pytest.approx(0.1, abs=1e-9)
+    # at the first tick the killed controller did not answer: 0.101 (it answered the 0.1 state, published before the
+    # pause, while paused), or 0.1 where the kill came before that answer (a loaded machine)
+    assert min(abs(t_fire - 0.1), abs(t_fire - 0.101)) < 1e-9, t_fire
+    assert not any(s.startswith("watchdog: no command") for t, s in zip(b.status_t, b.status) if t < 0.1 - 1e-9)
     assert after.sum() > 10 and np.all(b.current[after] == 0.0)
     assert rerun_bag(bag)["identical"]  # the zeroing is recorded like a command
 

@@ -241,3 +241,21 @@ def test_bad_fault_settings_are_refused(ros):
     p = ros.simulator(scene="nutation_oblate", bias_omega="[0.0, 1.0]")
     code, out = finish(p, 60)
     assert code == 2 and "bias_omega" in out, out
+
+
+def test_a_pause_longer_than_the_watchdog_does_not_fire_it(ros, tmp_path):
+    """Paused for three watchdog timeouts with a healthy controller (its answer to the paused tick's state queued
+    meanwhile): on resume no watchdog fires (before: it did, and zeroed the currents for a tick)."""
+    bag = tmp_path / "paused"
+    sim = ros.simulator(scene="nutation_oblate", duration=0.05, start_paused=True, watchdog_timeout=0.5, record=bag,
+                        startup_timeout=120.0)
+    ros.controller(scene="nutation_oblate")
+    p, out = run_script(ros, tmp_path, "/", [{"wait_status": "paused at t = 0 s"}, {"sleep": 1.5},
+                                             {"call": "resume"}, {"wait_status": "done:"}])
+    script_result(p, out)
+    code, text = finish(sim)
+    assert code == 0, text
+    b = read_bag(bag)
+    wd = [s for s in b.status if s.startswith("watchdog")]
+    print(f"\n  paused 1.5 s with watchdog_timeout 0.5 s: watchdog lines {wd}")
+    assert not wd and np.array_equal(b.L, gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.05).L)

@@ -43,16 +43,12 @@ def take(sub):
 
 
 def make_executor():
-    """rclpy's EventsExecutor (its event queue costs a fraction of the wait-set executors' per-callback work:
-    lockstep ticks/s) where the installed rclpy has it, else the SingleThreadedExecutor."""
-    try:
-        from rclpy.experimental import EventsExecutor
+    """The executor of a node's callbacks (run in the node's own loop thread). A SingleThreadedExecutor: its wait set
+    holds no backlog. (rclpy's EventsExecutor queues an event per message, which messages taken by polling, see
+    :func:`take`, never consume: services starve behind the backlog, and it grows without bound.)"""
+    from rclpy.executors import SingleThreadedExecutor
 
-        return EventsExecutor()
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-
-        return SingleThreadedExecutor()
+    return SingleThreadedExecutor()
 
 
 def msg_time(header) -> float:

@@ -59,6 +59,8 @@ DIAGNOSTICS_PERIOD = 1.0  # wall s between /diagnostics messages
 SUBSCRIBERS_REFRESH = 0.25  # wall s between looks at who subscribes to the per-sample topics
 PUMP_PERIOD = 0.05  # wall s between executor turns (services, parameters) while the loop runs
 MAX_COMMANDS_PER_TICK = 100  # commands taken at one tick (the subscription keeps the last 100)
+LATENCY_WINDOW = 100_000  # command latencies kept (the last ones): the done line's median, p99, max
+PUBLISHED_KEPT = 1000  # publish times of unanswered states kept (for the latency of a late answer)
 RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks")
 #: the node's parameters: (name, default, description, range, read-only); defaults None come from the scene
 PARAMETERS = (
@@ -176,7 +178,7 @@ class SimulatorNode(Node):
                          ("reset", self._srv_reset)):
             self.create_service(Trigger, f"gyro/{name}", cb)
         self.t_now = 0.0  # simulation time, for the service replies (set by the loop)
-        self.latencies: list[float] = []
+        self.latencies: deque = deque(maxlen=LATENCY_WINDOW)  # s; the done line's figures are over these
         self.published_wall: dict[int, float] = {}
 
     # --- parameters --------------------------------------------------------------------------
@@ -272,7 +274,7 @@ class SimulatorNode(Node):
                 L, q, w = s["L"][i], s["q"][i], s["omega_b"][i]
                 cov = None
                 if self.faults is not None and self.fault_config.sensors_active:
-                    L, q, w = self.faults.state(L, q, w)  # what a controller on a bench would read
+                    L, q, w = self.faults.state(L, q, w, stamp_ns(s["t"][i]))  # what a bench's sensors would read
                     cov = self.faults.covariances()
                 msgs = state_messages(s["t"][i], L, q, w, s["euler"][i], s["torque"][i], names, s["current"][i],
                                       s["rate"][i], s["phase"][i], imu_covariance=cov)
@@ -282,6 +284,9 @@ class SimulatorNode(Node):
                     if msgs.get(topic) is not None:
                         self.publish(topic, msgs[topic])
             self.published_wall[stamp_ns(s["t"][i])] = now
+        if len(self.published_wall) > PUBLISHED_KEPT:  # states no one answered (no controller, or a dead one)
+            for k in sorted(self.published_wall)[:-PUBLISHED_KEPT // 10]:
+                del self.published_wall[k]
 
 
 def last_sample(s: dict) -> dict:
@@ -298,6 +303,10 @@ class Loop:
         self.mode = p["mode"]
         self.expect = bool(p["expect_controller"])
         self.recorder = None
+        self.refused = 0
+        self.next_pump = 0.0
+        self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
+        self.new_run()  # before the bag is opened: a run that cannot be made leaves no half-written bag
         if p["record"]:
             from ..recording import BagRecorder, scene_text, stator_frames
 
@@ -306,10 +315,6 @@ class Loop:
                                                "gyro_sim.control_period": repr(p["control_period"]),
                                                **(node.fault_config.as_custom() if node.fault_config.active else {})},
                                         static_tf=stator_frames(node.scene))
-        self.refused = 0
-        self.next_pump = 0.0
-        self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
-        self.new_run()
 
     def new_run(self) -> None:
         """A fresh run of the scene from t = 0 (start, and gyro/reset)."""
@@ -332,6 +337,7 @@ class Loop:
         self.waiting_since: Optional[float] = None
         node.published_wall.clear()
         node.commands.clear()
+        node.latencies.clear()
         self.wall0 = self.last_cmd_wall = self.last_diag = time.perf_counter()
         self.paused_wall = 0.0  # wall s spent paused (not real time, not watchdog time)
         self.c0 = self.c_seen = compile_seconds()  # numba compile time: left out of the same
@@ -419,15 +425,12 @@ class Loop:
                                     wall)
             return False
         self.latest = cmd
-        self.last_cmd_wall = wall
+        self.last_cmd_wall = max(self.last_cmd_wall, wall)  # (a command queued while paused: not later than resume)
         self.have_cmd = True
         published = self.node.published_wall
         pub = published.pop(ns, None)
         if pub is not None:
             self.node.latencies.append(wall - pub)
-        if len(published) > 1000:  # states no one answered (a controller that answers ticks only): bounded
-            for k in sorted(published)[:-100]:
-                del published[k]
         if self.watchdog_fired:
             self.watchdog_fired = False
             self.status("watchdog: commands are back; control resumed")
@@ -511,6 +514,10 @@ class Loop:
     def tick(self) -> None:
         """At a control tick: take (lockstep: wait for) the command, apply it, run the watchdog."""
         self.n_ticks += 1
+        compiled = compile_seconds() - self.c_seen  # compiling (in the last advance) is no controller's silence:
+        if compiled:  # counted before this tick's commands are taken
+            self.c_seen += compiled
+            self.last_cmd_wall += compiled
         now = stamp_ns(self.runner.sim.t)
         self.prev_tick_ns, self.tick_ns = self.tick_ns, now
         wd = self.node.live["watchdog_timeout"]
@@ -527,12 +534,10 @@ class Loop:
             cmd = faults.command(cmd)  # dropped, corrupted, delayed, quantised (gyro_sim.faults)
         if cmd is not None:
             self.apply(cmd)
-        compiled = compile_seconds() - self.c_seen  # compiling is no controller's silence
-        if compiled:
-            self.c_seen += compiled
-            self.last_cmd_wall += compiled
         if self.expect and wd > 0 and not self.watchdog_fired and time.perf_counter() - self.last_cmd_wall > wd:
             self.watchdog_fired, self.fired_ns = True, now
+            if faults is not None:
+                faults.fifo.clear()  # a dead controller's delayed commands must not undo the zeroing
             self.apply((self.names, [0.0] * len(self.names), None, None))  # recorded like any command
             waited = (f"no command for {wd:g} s" if self.have_cmd else
                       f"no command since the start (startup_timeout {self.node.live['startup_timeout']:g} s)")
@@ -559,7 +564,7 @@ class Loop:
             self.diagnostics()
         held = time.perf_counter() - w0
         self.paused_wall += held
-        self.last_cmd_wall += held
+        self.last_cmd_wall = time.perf_counter()  # the watchdog counts from the resume
 
     def publish_samples(self, rows: slice) -> None:
         s = self.runner.samples(rows)
