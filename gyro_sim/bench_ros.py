@@ -11,7 +11,6 @@ discovery. Figures come from the nodes' own ``done:`` lines and the bags' metada
 """
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -20,30 +19,17 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["ros_part", "free_domain_id"]
+__all__ = ["ros_part"]
 
 LOCKSTEP_SCENES = (("spinup_thin_shell", 60.0), ("nutation_oblate", 2.0))
 REALTIME_SCENE = ("nutation_oblate", 2.0)  # 1 kHz control
 
 
-def free_domain_id(start: int = 1) -> int:
-    """A ROS_DOMAIN_ID in 1–101 with no DDS participant on this machine (participant 0's discovery port,
-    7400 + 250 d + 10, can be bound)."""
-    import socket
-
-    for d in list(range(start, 102)) + list(range(1, start)):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", 7410 + 250 * d))
-                return d
-            except OSError:
-                continue
-    raise RuntimeError("no free ROS domain id in 1-101")
-
-
 def _env(cache: Optional[str] = None) -> dict:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(free_domain_id(int(os.getpid()) % 97 + 1)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    """The environment of one measurement's processes: a ROS domain of their own, DDS on this machine."""
+    from .testing import ros_env, unique_domain
+
+    env = ros_env(unique_domain())
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = cache
     return env
@@ -99,17 +85,18 @@ def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
 def lockstep(scene: str, duration: float, tmp: Path) -> dict:
     """The two nodes over DDS in lockstep against the same scene in-process (warm caches)."""
     from .scene import load_scene
-    from .simulate import run
+    from .simulate import controller_period, run
 
     sc = load_scene(scene)
     run(sc, duration=min(duration, 0.1))  # warm (kernels loaded)
     w0 = time.perf_counter()
-    r = run(sc, duration=duration)
+    run(sc, duration=duration)
     wall_in = time.perf_counter() - w0
     sim = closed_loop(scene, ["-p", f"duration:={float(duration)!r}"])
     done = [line for line in (sim.stdout + sim.stderr).splitlines() if "done:" in line]
     line = done[-1] if done else ""
-    ticks = int(round(duration / (sc.controller.period or 1.0 / sc.output.rate))) if sc.controller else 0
+    period = controller_period(sc)
+    ticks = int(round(duration / period)) if period else 0
     return {"scene": scene, "duration": duration, "ticks": ticks,
             "ticks_per_s": _figure(r"control ticks \(([\d.]+)/s\)", line),
             "rtf_dds": _figure(r"\(([\d.]+)x real time\)", line), "rtf_in_process": duration / wall_in,

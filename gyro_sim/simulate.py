@@ -12,7 +12,6 @@ modes in the case frame only (gyro_sim/kernels.py): q, the Euler angles and θ a
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -60,6 +59,13 @@ def integrates_attitude(scene: Scene, attitude: Optional[bool] = None) -> bool:
     ctl = scene.controller
     return not (J[0] == J[1] == J[2] and not scene.effects.any and scene.fidelity == "full"
                 and (ctl is None or ctl.law in LAWS_WITHOUT_ATTITUDE))
+
+
+def controller_period(scene: Scene) -> Optional[float]:
+    """s between the ticks of the scene's controller: its ``period``, else one per output sample; None without a
+    controller section."""
+    ctl = scene.controller
+    return (ctl.period or 1.0 / scene.output.rate) if ctl is not None else None
 
 
 def _case_flag(attitude: bool) -> tuple:
@@ -543,10 +549,9 @@ class Runner:
         self.scene, self.T = scene, T
         self.sim = Simulator(scene, attitude)
         t_out = scene.output.sample_times(T)
-        ctl = scene.controller
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
-        self.period = control_period or ((ctl.period or 1.0 / scene.output.rate) if ctl is not None else None)
+        self.period = control_period or controller_period(scene)
         ticks = (np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if self.period is not None
                  else np.zeros(0))
         self._ticks = set(ticks.tolist())

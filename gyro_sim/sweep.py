@@ -404,7 +404,9 @@ def _k_metric(scene, name: str, xs: Sequence[float]) -> float:
         cyc = [c for c in m.limit_cycles() if c.name == want]
         return math.degrees(cyc[0].theta) if cyc else math.nan
     if name == "sampling_factor":  # mean drive of the sampled switching law: sin(Λh)/(Λh), Λ = |L0|/J
-        h = ctl.period or 1.0 / scene.output.rate
+        from .simulate import controller_period
+
+        h = controller_period(scene)
         x = _initial_L(scene) / m.rotor.J * h
         return math.sin(x) / x if x else 1.0
     if name == "time_to_deg":

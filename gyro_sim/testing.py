@@ -682,7 +682,7 @@ class GyroBench:
                                   f"{self._controllers()}", "exited", line, run)
         if sim.proc.returncode != 0 or run is None:
             raise BenchError(f"the simulator (scene {s['scene']!r}) exited with status {sim.proc.returncode}"
-                             + ("" if run is not None else " and left no bag") + f"; its output ends with:\n"
+                             + ("" if run is not None else " and left no bag") + "; its output ends with:\n"
                              + _tail(sim.output))
         start = _start_figures(next((x for x in run.status if x.startswith("simulator:")), ""))
         if start["controller_expected"] and not _answered(run):

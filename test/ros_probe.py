@@ -63,11 +63,7 @@ def listen(out: str, seconds: float, until: int, topics: list) -> None:
         return f
 
     for t in topics:
-        # the contract's QoS with a deep reader queue: the probe measures what was published, so a Python
-        # callback falling behind a burst must not drop samples (reliable keep_last drops the oldest)
-        qos = qos_profile(t)
-        qos.depth = max(qos.depth, 10000)
-        node.create_subscription(message_class(TOPICS[t]), t, cb(t), qos)
+        node.create_subscription(message_class(TOPICS[t]), t, cb(t), _deep(t))
     open(out + ".ready", "w").close()  # subscriptions exist: the test may start publishers
     def complete():
         if until:
@@ -145,18 +141,17 @@ def script(out: str, ns: str, seconds: float, steps: list) -> None:
 
     node = Node("gyro_script_probe", namespace=ns)
     seen = {"status": [], "scene": [], "diagnostics": [], "clock": []}
-    deep = _deep
     node.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
-                             lambda m: seen["status"].append(m.data), deep(TOPIC_STATUS))
+                             lambda m: seen["status"].append(m.data), _deep(TOPIC_STATUS))
     node.create_subscription(message_class(TOPICS[TOPIC_SCENE]), node_topic(TOPIC_SCENE),
-                             lambda m: seen["scene"].append(m.data), deep(TOPIC_SCENE))
+                             lambda m: seen["scene"].append(m.data), _deep(TOPIC_SCENE))
     node.create_subscription(message_class(TOPICS[TOPIC_CLOCK]), TOPIC_CLOCK,
-                             lambda m: seen["clock"].append(m.clock.sec + m.clock.nanosec * 1e-9), deep(TOPIC_CLOCK))
+                             lambda m: seen["clock"].append(m.clock.sec + m.clock.nanosec * 1e-9), _deep(TOPIC_CLOCK))
     node.create_subscription(message_class(TOPICS[TOPIC_DIAGNOSTICS]), TOPIC_DIAGNOSTICS,
                              lambda m: seen["diagnostics"].extend(
                                  [s.level[0] if isinstance(s.level, bytes) else int(s.level), s.name, s.message,
                                   s.hardware_id, {kv.key: kv.value for kv in s.values}] for s in m.status),
-                             deep(TOPIC_DIAGNOSTICS))
+                             _deep(TOPIC_DIAGNOSTICS))
     sim = (ns.rstrip("/") + "/gyro_simulator") if ns != "/" else "/gyro_simulator"
     get_c = node.create_client(GetParameters, f"{sim}/get_parameters")
     set_c = node.create_client(SetParameters, f"{sim}/set_parameters")
@@ -200,6 +195,8 @@ def script(out: str, ns: str, seconds: float, steps: list) -> None:
 
 
 def _deep(topic):
+    """The contract's QoS with a deep reader queue: the probe measures what was published, so a Python callback
+    falling behind a burst must not drop samples (reliable keep_last drops the oldest)."""
     qos = qos_profile(topic)
     qos.depth = max(qos.depth, 10000)
     return qos

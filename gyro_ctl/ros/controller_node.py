@@ -21,8 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from pydantic import ValidationError
 
-from gyro_sim.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, command_message,
-                               node_topic, to_ros)
+from gyro_sim.messages import TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, node_topic
 from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
 from gyro_sim.scene import SceneError, load_scene
 from gyro_sim.simulate import stator_triad

@@ -45,7 +45,7 @@ from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPI
 from ..compile_watch import announce_compiles, compile_seconds
 from ..faults import FaultConfig, Faults
 from ..scene import SceneError, load_scene
-from ..simulate import Runner
+from ..simulate import Runner, controller_period
 from .common import (BUSY_POLL, make_executor, message_class, node_main, parse_command, qos_profile, take,
                      wait_for_matches)
 
@@ -85,7 +85,8 @@ PARAMETERS = (
     ("progress", False, "a progress line on stderr about once a wall second: simulated time, ticks/s, real-time "
      "factor (gyro-sim run --ros sets it on a terminal)", None, True),
     # fault injection (gyro_sim.faults): off by default, reproducible from fault_seed
-    ("fault_seed", 0, "seed of the injected faults (commands and sensors draw from two streams of it)",
+    ("fault_seed", 0, "seed of the injected faults (commands: one stream of it; sensor noise: a function of it and "
+     "the state's stamp)",
      (0, 2**31 - 1), True),
     ("command_drop", 0.0, "fraction of commands dropped (never applied: the previous command stays)", (0.0, 1.0), True),
     ("command_corrupt", 0.0, "fraction of commands whose currents are each scaled by a factor uniform in [0, 2)",
@@ -111,18 +112,17 @@ def tf_available() -> bool:
 
 
 class RunControl:
-    """Pause / resume / step / reset requests from the service callbacks to the loop (thread-safe)."""
+    """Pause / resume / step / reset requests from the service callbacks to the loop (both run in the loop's
+    thread: :meth:`Loop.pump`)."""
 
     def __init__(self, paused: bool):
-        self.lock = threading.Lock()
         self.paused = paused
         self.steps_left = 0  # ticks still to run before pausing again
         self.reset = False
 
     def request(self, **kw) -> None:
-        with self.lock:
-            for k, v in kw.items():
-                setattr(self, k, v)
+        for k, v in kw.items():
+            setattr(self, k, v)
 
 
 class SimulatorNode(Node):
@@ -136,8 +136,7 @@ class SimulatorNode(Node):
         except SceneError as e:
             raise SceneError(f"parameter scene = {self.get_parameter('scene').value!r}: {e}") from None
         ctl = self.scene.controller
-        in_force = {"control_period": float((ctl.period or 1.0 / self.scene.output.rate) if ctl is not None
-                                            else DEFAULT_CONTROL_PERIOD),
+        in_force = {"control_period": float(controller_period(self.scene) or DEFAULT_CONTROL_PERIOD),
                     "expect_controller": ctl is not None}
         for name, default, description, rng, read_only in PARAMETERS[1:]:
             self._declare(name, in_force.get(name, default), description, rng, read_only)
@@ -159,7 +158,6 @@ class SimulatorNode(Node):
         # (message, wall time received): filled by the executor in the loop's thread; bounded (a flood drops the
         # oldest, as the subscription's keep-last queue does)
         self.commands: deque = deque(maxlen=10 * MAX_COMMANDS_PER_TICK)
-        self.events = 0  # callbacks run (commands, services): Loop.pump runs the executor until it stops moving
         self.tf = tf_available()
         topics = [t for t in SAMPLE_TOPICS if t != TOPIC_TF or self.tf]
         if self.scene.effects.flywheel is None and self.scene.effects.damper is None:
@@ -204,7 +202,6 @@ class SimulatorNode(Node):
 
     # --- services ----------------------------------------------------------------------------
     def _srv_pause(self, request, response):
-        self.events += 1
         c = self.control
         response.success = not c.paused
         response.message = (f"already paused at t = {self.t_now:.9g} s" if c.paused
@@ -213,7 +210,6 @@ class SimulatorNode(Node):
         return response
 
     def _srv_resume(self, request, response):
-        self.events += 1
         c = self.control
         response.success = c.paused
         response.message = f"resumed at t = {self.t_now:.9g} s" if c.paused else "not paused"
@@ -221,7 +217,6 @@ class SimulatorNode(Node):
         return response
 
     def _srv_step(self, request, response):
-        self.events += 1
         c = self.control
         n = int(self.live["step_ticks"])
         if not c.paused:
@@ -232,7 +227,6 @@ class SimulatorNode(Node):
         return response
 
     def _srv_reset(self, request, response):
-        self.events += 1
         if self.recording:
             response.success = False
             response.message = (f"reset: refused while recording to {self.get_parameter('record').value!r} "
@@ -245,7 +239,6 @@ class SimulatorNode(Node):
     # --- topics ------------------------------------------------------------------------------
     def _on_command(self, msg) -> None:
         self.commands.append((msg, time.perf_counter()))
-        self.events += 1
 
     def publish(self, topic: str, fields: dict) -> None:
         self.pubs[topic].publish(to_ros(self.classes[topic], fields))
@@ -270,11 +263,12 @@ class SimulatorNode(Node):
         now = time.perf_counter()
         topics = self.subscribed()
         for i in range(s["t"].size):
+            ns = stamp_ns(s["t"][i])
             if topics:
                 L, q, w = s["L"][i], s["q"][i], s["omega_b"][i]
                 cov = None
                 if self.faults is not None and self.fault_config.sensors_active:
-                    L, q, w = self.faults.state(L, q, w, stamp_ns(s["t"][i]))  # what a bench's sensors would read
+                    L, q, w = self.faults.state(L, q, w, ns)  # what a bench's sensors would read
                     cov = self.faults.covariances()
                 msgs = state_messages(s["t"][i], L, q, w, s["euler"][i], s["torque"][i], names, s["current"][i],
                                       s["rate"][i], s["phase"][i], imu_covariance=cov)
@@ -283,7 +277,7 @@ class SimulatorNode(Node):
                 for topic in topics:
                     if msgs.get(topic) is not None:
                         self.publish(topic, msgs[topic])
-            self.published_wall[stamp_ns(s["t"][i])] = now
+            self.published_wall[ns] = now
         if len(self.published_wall) > PUBLISHED_KEPT:  # states no one answered (no controller, or a dead one)
             for k in sorted(self.published_wall)[:-PUBLISHED_KEPT // 10]:
                 del self.published_wall[k]
@@ -295,7 +289,8 @@ def last_sample(s: dict) -> dict:
 
 
 class Loop:
-    """The simulation loop of one node (main thread); DDS callbacks and services run in an executor thread."""
+    """The simulation loop of one node; the node's callbacks (commands, services, parameters) run in the same thread
+    (:meth:`pump`, :meth:`wait_for`, :meth:`wait_wall`, :meth:`hold`), and commands are polled (:func:`take`)."""
 
     def __init__(self, node: SimulatorNode, stop: threading.Event, spin_once):
         self.node, self.stop, self.spin_once = node, stop, spin_once
@@ -553,9 +548,8 @@ class Loop:
         announced = False
         w0 = time.perf_counter()
         while not self.stop.is_set():
-            with c.lock:
-                if c.reset or not c.paused or c.steps_left > 0:
-                    break
+            if c.reset or not c.paused or c.steps_left > 0:
+                break
             if not announced:
                 self.status(f"paused at t = {self.runner.sim.t:.9g} s")
                 self.diagnostics(force=True)
@@ -611,9 +605,8 @@ class Loop:
                 if r.row > 0 and r.is_control_tick:
                     self.tick()
                     c = node.control
-                    with c.lock:
-                        if c.steps_left > 0:
-                            c.steps_left -= 1
+                    if c.steps_left > 0:
+                        c.steps_left -= 1
                 rows = r.advance()
                 if self.stop.is_set() and rows.stop == rows.start:
                     break
@@ -653,8 +646,7 @@ class Loop:
         """Reset if asked; hold at a tick while paused."""
         c = self.node.control
         if c.reset:
-            with c.lock:
-                c.reset = False
+            c.reset = False
             self.new_run()
             self.status("reset: back to the scene's initial state at t = 0")
         r = self.runner
