@@ -15,6 +15,11 @@
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
+
+Exit status: 0 a complete run; 1 a run that failed (its bag could not be written whole: it is closed with what
+fit); 2 bad usage, a bad scene or an unusable output path (checked before the run); 128 + the signal for a run
+ended by a signal (130 Ctrl-C / SIGINT, 143 SIGTERM, 129 SIGHUP): a recorded run's bag is then closed with
+everything up to the signal and summarised.
 """
 from __future__ import annotations
 
@@ -28,6 +33,7 @@ from gyro_sim import __version__
 __all__ = ["main", "build_parser", "format_summary"]
 
 EXIT_OK = 0
+EXIT_FAILURE = 1  # a run that failed (e.g. its bag could not be written whole)
 EXIT_USAGE = 2  # argparse's status for bad usage; scene errors use it too
 
 
@@ -257,8 +263,11 @@ class _Progress:
         self.w0, self.c0 = time.perf_counter(), compile_seconds()
         self.last = self.w0
         self.shown = False
+        self.t = 0.0  # s, the last sample seen
 
     def __call__(self, samples: dict) -> None:
+        if samples["t"].size:
+            self.t = float(samples["t"][-1])
         now = self.time.perf_counter()
         if not self.enabled or now - self.last < 1.0 or now - self.w0 < 2.0:
             return
@@ -271,6 +280,7 @@ class _Progress:
     def close(self) -> None:
         if self.shown:
             _write(sys.stderr, "\n")
+            self.shown = False
 
 
 def _cmd_run(args) -> int:
@@ -283,6 +293,16 @@ def _cmd_run(args) -> int:
 
     if args.record is not None and args.record.exists():
         return _error(f"--record {args.record}: already exists; give a new directory")
+    bad = _unwritable_out(args.out)
+    if bad:
+        return _error(bad)
+    if args.record is not None:
+        from gyro_sim.recording import RecordingError, check_write_target
+
+        try:
+            check_write_target(args.record, "--record")
+        except (RecordingError, FileExistsError) as exc:
+            return _error(str(exc))
     if args.ros and args.fidelity not in (None, "full"):
         return _error(f"--fidelity {args.fidelity}: the ROS simulator node runs the full model; drop --ros or --fidelity")
     try:
@@ -295,29 +315,70 @@ def _cmd_run(args) -> int:
     from gyro_sim.compile_watch import announce_compiles
 
     announce_compiles()  # one line where numba compiles (a first use), before the long pause it explains
-    progress = _Progress(args.duration or scene.duration, not args.quiet and sys.stderr.isatty())
-    try:
-        # a bag's /gyro/imu and /gyro/euler need the attitude: a recorded run integrates it whatever the
-        # scene's output.attitude says
-        keep = {"attitude": True} if args.record is not None else {}
-        result = simulate.run(scene, duration=args.duration, on_samples=progress, **keep)
-    except scene_mod.SceneError as exc:
-        return _error(str(exc))
-    finally:
-        progress.close()
-    if args.record is not None:
-        from gyro_sim.recording import record_result
+    from gyro_sim.recording import RecordingError, exit_status, record_run, sigterm_as_interrupt
 
-        record_result(result, args.record)
+    progress = _Progress(args.duration or scene.duration, not args.quiet and sys.stderr.isatty())
     png = Path(args.out) / f"{name}.png"
     try:
-        plotting.plot_run(result, png)
+        if args.record is not None:
+            # streamed: the bag is written as the run goes (a signal or a full disk leaves it closed with
+            # everything up to then); it integrates the attitude whatever output.attitude says (/gyro/imu needs it)
+            result = record_run(scene, args.record, duration=args.duration, on_samples=progress)
+        else:
+            with sigterm_as_interrupt():
+                result = simulate.run(scene, duration=args.duration, on_samples=progress)
+    except scene_mod.SceneError as exc:
+        return _error(str(exc))
+    except RecordingError as exc:
+        progress.close()
+        _error(str(exc))
+        return EXIT_FAILURE
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP
+        progress.close()
+        code = exit_status(exc)
+        if args.record is None:
+            _write(sys.stderr, f"interrupted ({_signal_name(code)}) at t = {progress.t:.6g} s; nothing was recorded "
+                               "(--record BAG writes a run as it goes)\n")
+            return code
+        _write(sys.stderr, f"interrupted ({_signal_name(code)}): the bag holds the run up to the signal\n")
+        _summarise_bag(args.record, png)
+        return code
+    finally:
+        progress.close()
+    try:
+        plotting.plot_run(result.preview(), png)
     except OSError as exc:
         return _error(f"cannot write the plot {png}: {exc.strerror or exc}")
-    _write(sys.stdout, format_summary(name, result.summary(), png))
+    _write(sys.stdout, format_summary(name, result.preview().summary(), png))
     if args.record is not None:
         _write(sys.stdout, f"{'bag':<16}  {args.record}\n")
     return EXIT_OK
+
+
+def _signal_name(status: int) -> str:
+    import signal
+
+    try:
+        return signal.Signals(status - 128).name
+    except ValueError:
+        return f"status {status}"
+
+
+def _unwritable_out(out: Path):
+    """Why the plot folder ``--out`` cannot be used (checked before the run), or None."""
+    import os
+
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        return f"--out {out}: is a file, not a folder for the plot"
+    base = p
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    if not base.is_dir():
+        return f"--out {out}: {base} is not a folder"
+    if not os.access(base, os.W_OK | os.X_OK):
+        return f"--out {out}: {base} is not writable"
+    return None
 
 
 def _run_ros(args, scene, name) -> int:

@@ -34,6 +34,7 @@ import os
 import shutil
 import signal
 import threading
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,7 +54,8 @@ from .messages import (
 if TYPE_CHECKING:  # pragma: no cover
     from .simulate import RunResult
 
-__all__ = ["BagRecorder", "BagData", "record_result", "stator_frames", "scene_text", "read_bag", "bag_info", "sigterm_as_interrupt",
+__all__ = ["BagRecorder", "BagData", "record_result", "record_run", "stator_frames", "scene_text", "read_bag", "bag_info",
+           "sigterm_as_interrupt", "check_write_target", "RecordingError", "RunInterrupted", "exit_status",
            "BAG_VERSION", "CUSTOM_KEYS"]
 
 BAG_VERSION = 8  # rosbag2 metadata format version: the newest that ROS 2 Humble reads
@@ -99,22 +101,41 @@ def _qos(topic: str):
 
 # --- signals ----------------------------------------------------------------------------------
 
+class RunInterrupted(KeyboardInterrupt):
+    """A run stopped by a signal (SIGTERM, SIGHUP; SIGINT raises a plain KeyboardInterrupt): ``signum``.
+    ``exit_status`` is the shell's convention, 128 + signal number (143 for SIGTERM, 130 for SIGINT)."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"signal {signal.Signals(signum).name}")
+        self.signum = int(signum)
+
+    @property
+    def exit_status(self) -> int:
+        return 128 + self.signum
+
+
+def exit_status(exc: BaseException) -> int:
+    """128 + the signal that ended a run (130 for Ctrl-C's plain KeyboardInterrupt, 143 for SIGTERM)."""
+    return exc.exit_status if isinstance(exc, RunInterrupted) else 128 + int(signal.SIGINT)
+
+
 @contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
-    """Within the block, SIGTERM raises KeyboardInterrupt (as Ctrl-C does), so ``finally`` /
-    ``with BagRecorder`` close the bag. Main thread only (elsewhere a no-op)."""
+    """Within the block, SIGTERM and SIGHUP raise :class:`RunInterrupted` (a KeyboardInterrupt, as Ctrl-C
+    raises), so ``finally`` / ``with BagRecorder`` close the bag. Main thread only (elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def _raise(signum, frame):
-        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+        raise RunInterrupted(signum)
 
-    old = signal.signal(signal.SIGTERM, _raise)
+    old = {sig: signal.signal(sig, _raise) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 @contextmanager
@@ -147,6 +168,62 @@ def _signals_deferred() -> Iterator[None]:
 
 # --- writing ----------------------------------------------------------------------------------
 
+#: a chunk of the MCAP file is written out (and handed to the OS) once it spans this many simulated seconds or
+#: has been open this many wall seconds, or holds 1 MiB (rosbags' own bound): kill -9 or a crash loses at most
+#: the chunk that was open (`gyro-sim bag recover` rebuilds the rest); the first chunk (message definitions and
+#: the scene) is written out with the first message
+CHUNK_SPAN = 1.0
+CHUNK_WALL = 1.0
+#: bytes a recorder keeps allocated next to its bag (``.gyro_sim_reserve``) while writing; freed to close the bag
+#: when the disk fills (its summary and metadata.yaml need room); grows by RESERVE_PER_CHUNK per chunk written
+RESERVE_BYTES = 4 << 20
+RESERVE_PER_CHUNK = 512
+RESERVE_NAME = ".gyro_sim_reserve"
+#: free space a recording wants before it starts (the reserve and the first chunks): checked up front
+MIN_FREE_BYTES = 16 << 20
+
+
+class RecordingError(OSError):
+    """Recording failed (a target that is not writable, a full disk, a file size limit): one line that names the
+    bag, the error and what the bag holds."""
+
+
+def _nearest_existing(path: Path) -> Path:
+    p = path.absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def check_write_target(path: Union[str, os.PathLike], what: str = "bag output") -> None:
+    """Refuse, before any work, a bag path that cannot be recorded to: one that exists, under a file, in a
+    directory that is not writable (read-only file system, permissions), or on a file system with less than
+    :data:`MIN_FREE_BYTES` free. Raises :class:`RecordingError` (FileExistsError for an existing path)."""
+    path = Path(path)
+    if path.exists() or path.is_symlink():
+        raise FileExistsError(f"{what} {str(path)!r} already exists; refusing to overwrite it "
+                              "(choose a new path or remove the old bag)")
+    base = _nearest_existing(path)
+    if not base.is_dir():
+        raise RecordingError(f"{what} {str(path)!r}: {str(base)!r} is not a directory")
+    if not os.access(base, os.W_OK | os.X_OK):
+        try:
+            st = os.statvfs(base)
+            ro = bool(st.f_flag & os.ST_RDONLY)
+        except OSError:
+            ro = False
+        why = "is on a read-only file system" if ro else "is not writable"
+        raise RecordingError(f"{what} {str(path)!r}: {str(base)!r} {why}")
+    try:
+        st = os.statvfs(base)
+    except OSError:
+        return
+    free = st.f_bavail * st.f_frsize
+    if free < MIN_FREE_BYTES:
+        raise RecordingError(f"{what} {str(path)!r}: only {free / 2**20:.1f} MiB free on {str(base)!r}; a recording "
+                             f"needs at least {MIN_FREE_BYTES / 2**20:.0f} MiB to start")
+
+
 class BagRecorder:
     """Writes one rosbag2 bag (MCAP) of a run: a context manager, closable from ``finally``.
 
@@ -157,12 +234,19 @@ class BagRecorder:
 
     Leaving the ``with`` block, normally or by an exception (KeyboardInterrupt included),
     closes the bag: everything written so far is in a complete, indexed file; custom_data
-    ``gyro_sim.end`` says ``complete`` or ``interrupted: <exception>``. The scene message is
-    logged at the time of the first message written (t = 0 if none). Thread-safe.
+    ``gyro_sim.end`` says ``complete`` or ``interrupted: <exception>`` and ``gyro_sim.duration`` the time of the
+    last state sample written (s). The scene message is logged at the time of the first message written (t = 0
+    if none). Thread-safe.
+
+    The bag is written as it goes: chunks of at most ``chunk_span`` simulated or ``chunk_wall`` wall seconds
+    (:data:`CHUNK_SPAN`, :data:`CHUNK_WALL`), so memory stays flat and a crash loses at most one chunk. A write
+    that fails (disk full, file size limit) drops the chunk it was writing, frees the space reserve, closes the
+    bag with what was written whole and raises :class:`RecordingError`; every later write raises it too.
     """
 
     def __init__(self, path: Union[str, os.PathLike], scene_text: str, scene_name: str,
-                 extra: Optional[Mapping[str, Any]] = None, static_tf: Optional[Mapping[str, Any]] = None):
+                 extra: Optional[Mapping[str, Any]] = None, static_tf: Optional[Mapping[str, Any]] = None,
+                 chunk_span: float = CHUNK_SPAN, chunk_wall: float = CHUNK_WALL):
         from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
         self._writer = None
@@ -184,43 +268,164 @@ class BagRecorder:
                 raise ValueError(f"BagRecorder: extra[{k!r}] = {v!r}: must be a str or a number")
             custom[k] = str(v)
         path = Path(path)
-        if path.exists() or path.is_symlink():
-            raise FileExistsError(
-                f"bag output {str(path)!r} already exists; refusing to overwrite it "
-                "(choose a new path or remove the old bag)")
+        check_write_target(path)
         self.path = path
         ts = _typestore()
         self._ts = ts
         writer = Writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         for k, v in custom.items():
             writer.set_custom_data(k, v)
+        top = _nearest_existing(path)  # directories made from here on are removed if the bag cannot start
         try:
             writer.open()
         except WriterError as e:  # created by someone else since the check above
             raise FileExistsError(f"bag output {str(path)!r}: {e}") from None
-        try:
-            self._conns = {
-                topic: writer.add_connection(topic, msgtype, typestore=ts, offered_qos_profiles=[_qos(topic)])
-                for topic, msgtype in TOPICS.items()
-            }
-        except BaseException:
-            writer.abort()
-            shutil.rmtree(path, ignore_errors=True)
-            raise
+        except OSError as e:
+            raise RecordingError(f"bag output {str(path)!r}: cannot create it: {e.strerror or e}") from None
         self._lock = threading.Lock()
         self._scene_fields = scene_message(scene_text)
         self._static_tf = dict(static_tf) if static_tf is not None else None
         self._scene_written = False
         self._end = "complete"
         self.counts = {topic: 0 for topic in TOPICS}
-        self._writer = writer
+        self.t_last = math.nan  # s, the last state sample written (in the open chunk or before)
+        self.t_saved = math.nan  # s, the last state sample in a chunk written out whole
+        self._span_ns = int(round(float(chunk_span) * 1e9))
+        self._chunk_wall = float(chunk_wall)
+        self._failed: Optional[str] = None
+        self._reserve_fd: Optional[int] = None
+        self._reserved = 0
+        try:
+            self._conns = {
+                topic: writer.add_connection(topic, msgtype, typestore=ts, offered_qos_profiles=[_qos(topic)])
+                for topic, msgtype in TOPICS.items()
+            }
+            self._writer = writer
+            self._hook_chunks()
+            self._reserve(RESERVE_BYTES)
+        except BaseException as e:
+            self._writer = None
+            writer.abort()
+            self._remove_new(path, top)
+            if isinstance(e, OSError) and not isinstance(e, RecordingError):
+                raise RecordingError(f"bag output {str(path)!r}: cannot start it: {e.strerror or e}") from None
+            raise
+
+    @staticmethod
+    def _remove_new(path: Path, top: Path) -> None:
+        """Remove the bag directory and the parents made for it (up to ``top``, which existed)."""
+        shutil.rmtree(path, ignore_errors=True)
+        p = path.absolute().parent
+        while p != top.absolute() and p != p.parent:
+            try:
+                p.rmdir()
+            except OSError:
+                break
+            p = p.parent
+
+    # --- chunks written as they fill; the state after the last one written whole ----------------
+    def _hook_chunks(self) -> None:
+        """Make the MCAP storage flush every chunk it closes and remember the state after it (see :meth:`_salvage`).
+        (rosbags' McapWriter closes a chunk at 1 MiB by calling its own ``close_chunk``.)"""
+        st = self._writer.storage
+        close_chunk = st.close_chunk
+
+        def close_and_flush() -> None:
+            close_chunk()
+            st.bio.flush()
+            self._mark_saved()
+            if len(st.chunks) % 1024 == 0:  # room for the index of the next 1024 chunks
+                self._reserve(self._reserved + 1024 * RESERVE_PER_CHUNK)
+
+        st.close_chunk = close_and_flush
+        self._mark_saved()
+
+    def _mark_saved(self) -> None:
+        w = self._writer
+        st = w.storage
+        self._saved = (st.bio.tell(), len(st.chunks), dict(st.channel_stats), st.message_start_time,
+                       st.message_end_time, dict(w.counts), w.min_timestamp, w.max_timestamp, dict(self.counts),
+                       self.t_last)
+        self.t_saved = self.t_last
+        self._chunk_opened = time.monotonic()
+
+    def _reserve(self, size: int) -> None:
+        """Keep ``size`` bytes allocated in the reserve file (raises OSError when the disk has no room)."""
+        if self._reserve_fd is None:
+            self._reserve_fd = os.open(self.path / RESERVE_NAME, os.O_CREAT | os.O_WRONLY | os.O_EXCL, 0o600)
+        os.posix_fallocate(self._reserve_fd, 0, size)
+        self._reserved = size
+
+    def _free_reserve(self) -> None:
+        fd, self._reserve_fd = self._reserve_fd, None
+        if fd is not None:
+            os.close(fd)
+            try:
+                os.unlink(self.path / RESERVE_NAME)
+            except OSError:
+                pass
+
+    def _maybe_close_chunk(self, ns: int) -> None:
+        """Write the open chunk out if it is the first (definitions and scene), spans ``chunk_span`` simulated
+        seconds or has been open ``chunk_wall`` wall seconds."""
+        st = self._writer.storage
+        ch = st.chunk
+        if ch.bio.tell() and (not st.chunks or ns - ch.message_start_time >= self._span_ns
+                              or time.monotonic() - self._chunk_opened >= self._chunk_wall):
+            st.close_chunk()
+
+    def _salvage(self, exc: OSError) -> str:
+        """After a failed write: cut the file back to the last chunk written whole, free the reserve and close the
+        bag (``gyro_sim.end`` says why). Returns the one-line description of what happened."""
+        from collections import defaultdict
+        from io import BytesIO
+
+        from rosbags.rosbag2.storage_mcap import PendingChunk
+
+        w = self._writer
+        st = w.storage
+        why = exc.strerror or str(exc)
+        pos, nchunks, stats, t0, t1, wcounts, mn, mx, counts, t_saved = self._saved
+        try:
+            st.bio.close()  # (its buffer may still hold bytes that do not fit: they are dropped below)
+        except OSError:
+            pass
+        self._free_reserve()
+        text = (f"recording to {str(self.path)!r} stopped: {why}; " if self._failed is None else "")
+        try:
+            os.truncate(st.path, pos)
+            st.bio = open(st.path, "r+b")
+            st.bio.seek(pos)
+            del st.chunks[nchunks:]
+            st.channel_stats, st.message_start_time, st.message_end_time = dict(stats), t0, t1
+            st.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            w.counts, w.min_timestamp, w.max_timestamp = dict(wcounts), mn, mx
+            self.counts, self.t_last = dict(counts), t_saved
+            held = f"up to t = {t_saved:.6g} s" if math.isfinite(t_saved) else "no samples"
+            w.set_custom_data(CUSTOM_KEYS["end"], f"interrupted: {why} (the bag holds {held})")
+            w.set_custom_data(_PREFIX + "duration", repr(t_saved if math.isfinite(t_saved) else 0.0))
+            w.close()
+            return text + f"the bag is closed with what was written ({held})"
+        except OSError as e2:
+            try:
+                w.abort()
+            except OSError:
+                pass
+            return text + (f"the bag could not be closed ({e2.strerror or e2}): it holds the chunks written "
+                           f"before; free some space and run: gyro-sim bag recover {self.path}")
+        finally:
+            self._writer = None
 
     # --- context manager
     def __enter__(self) -> "BagRecorder":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is not None:
+        if isinstance(exc, RunInterrupted):
+            self._end = f"interrupted: {signal.Signals(exc.signum).name}"
+        elif isinstance(exc, KeyboardInterrupt):
+            self._end = "interrupted: SIGINT (Ctrl-C)"
+        elif exc_type is not None:
             self._end = f"interrupted: {exc_type.__name__}" + (f" ({exc})" if str(exc) else "")
         self.close()
         return False
@@ -253,22 +458,32 @@ class BagRecorder:
         msgtype = TOPICS[topic]
         return self._ts.serialize_cdr(to_rosbags(self._ts, msgtype, fields), msgtype)
 
-    def _write(self, ns: int, items: Sequence[tuple[str, Any]]) -> None:
-        """Write serialized (topic, data) pairs at log time ns (all or, on a bad argument, none)."""
+    def _write(self, ns: int, items: Sequence[tuple[str, Any]], t_sample: Optional[float] = None) -> None:
+        """Write serialized (topic, data) pairs at log time ns (all or, on a bad argument, none); ``t_sample``:
+        the time of the state sample they carry (s), if they do."""
         with self._lock:
             w = self._writer
             if w is None:
+                if self._failed:
+                    raise RecordingError(self._failed)
                 raise RuntimeError(f"bag {str(self.path)!r} is closed")
-            if not self._scene_written:
-                w.write(self._conns[TOPIC_SCENE], ns, self._serialize(TOPIC_SCENE, self._scene_fields))
-                self.counts[TOPIC_SCENE] += 1
-                if self._static_tf is not None:
-                    w.write(self._conns[TOPIC_TF_STATIC], ns, self._serialize(TOPIC_TF_STATIC, self._static_tf))
-                    self.counts[TOPIC_TF_STATIC] += 1
-                self._scene_written = True
-            for topic, data in items:
-                w.write(self._conns[topic], ns, data)
-                self.counts[topic] += 1
+            try:
+                if not self._scene_written:
+                    w.write(self._conns[TOPIC_SCENE], ns, self._serialize(TOPIC_SCENE, self._scene_fields))
+                    self.counts[TOPIC_SCENE] += 1
+                    if self._static_tf is not None:
+                        w.write(self._conns[TOPIC_TF_STATIC], ns, self._serialize(TOPIC_TF_STATIC, self._static_tf))
+                        self.counts[TOPIC_TF_STATIC] += 1
+                    self._scene_written = True
+                for topic, data in items:
+                    w.write(self._conns[topic], ns, data)
+                    self.counts[topic] += 1
+                if t_sample is not None:
+                    self.t_last = t_sample
+                self._maybe_close_chunk(ns)
+            except OSError as exc:
+                self._failed = self._salvage(exc)
+                raise RecordingError(self._failed) from None
 
     def write_sample(self, t: float, L: Any, q: Any, omega_b: Any, euler: Any, torque: Any,
                      names: Sequence[str], current: Any, rate: Any, phase: Any,
@@ -281,7 +496,7 @@ class BagRecorder:
         if eff is not None:
             msgs[TOPIC_EFFECTS] = eff
         ns = stamp_ns(t)
-        self._write(ns, [(topic, self._serialize(topic, f)) for topic, f in msgs.items()])
+        self._write(ns, [(topic, self._serialize(topic, f)) for topic, f in msgs.items()], float(t))
 
     def write_command(self, t: float, names: Sequence[str], current: Optional[Any], rate: Optional[Any]) -> None:
         """A stator command at time t: currents (A) and/or signed rates (rad/s) of the named stators."""
@@ -301,8 +516,14 @@ class BagRecorder:
         """Mark the run as ended early (custom_data ``gyro_sim.end`` = ``interrupted: <reason>``)."""
         self._end = f"interrupted: {reason}"
 
+    @property
+    def failed(self) -> Optional[str]:
+        """The one-line description of a failed write (the bag was closed with what fit), else None."""
+        return self._failed
+
     def close(self) -> None:
-        """Finish the bag (index, summary, metadata.yaml). Idempotent."""
+        """Finish the bag (index, summary, metadata.yaml; ``gyro_sim.duration`` = the last sample's time). Idempotent.
+        A close that fails for lack of room drops the open chunk and closes with the rest (RecordingError)."""
         with self._lock:
             w = self._writer
             if w is None:
@@ -314,11 +535,20 @@ class BagRecorder:
                         self.counts[TOPIC_SCENE] += 1
                         self._scene_written = True
                     w.set_custom_data(CUSTOM_KEYS["end"], self._end)
+                    w.set_custom_data(_PREFIX + "duration", repr(self.t_last if math.isfinite(self.t_last) else 0.0))
+                    self._free_reserve()
                     w.close()
+                except OSError as exc:
+                    if w.storage is None:  # (metadata.yaml failed after the MCAP file was complete)
+                        self._failed = f"bag {str(self.path)!r}: cannot write metadata.yaml: {exc.strerror or exc}"
+                    else:
+                        self._failed = self._salvage(exc)
+                    raise RecordingError(self._failed) from None
                 except BaseException:
                     w.abort()
                     raise
                 finally:
+                    self._free_reserve()
                     self._writer = None
 
 
@@ -377,7 +607,7 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
     # every command the run applied (scene schedule and controller), at the time it applied it
     groups = [(float(t), list(nm), _command_values(cur), _command_values(rate))
               for t, nm, cur, rate in getattr(result, "commands", []) if t < t_end]
-    ext = {"gyro_sim.duration": repr(t_end), "gyro_sim.steps": int(result.steps),
+    ext = {"gyro_sim.steps": int(result.steps),
            "gyro_sim.wall_time": float(result.wall_time)}
     ext.update(extra or {})
     rows = (result.t.tolist(), result.L.tolist(), result.q.tolist(), result.omega_b.tolist(),
@@ -395,6 +625,185 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
         for g in groups[gi:]:
             rec.write_command(*g)
     return Path(path)
+
+
+# --- a run streamed to its bag -------------------------------------------------------------------
+
+#: output rows a streamed run holds in memory at once (its buffer; released as they are written)
+STREAM_BUFFER_ROWS = 4096
+#: a streamed run keeps its rows in memory for the RunResult up to this many bytes; beyond, the result reads
+#: its series back from the bag when first used (RunResult.lazy) and keeps a decimated preview
+KEEP_BYTES = 256 << 20
+#: rows of that preview (every k-th row, k doubling as the run goes on, and the last row)
+PREVIEW_ROWS = 20_000
+
+
+class _Kept:
+    """The output rows of a streamed run kept for its RunResult: all of them up to ``keep_bytes``, and always a
+    decimated preview (every ``stride``-th row; the stride doubles when the preview reaches PREVIEW_ROWS)."""
+
+    KEYS = ("t", "L", "q", "omega_b", "torque", "energy", "current", "rate", "phase", "modes")
+
+    def __init__(self, keep_bytes: int):
+        self.keep_bytes, self.bytes = keep_bytes, 0
+        self.chunks: Optional[list] = []
+        self.commands: Optional[list] = []
+        self.preview: list = []
+        self.stride, self.seen = 1, 0
+        self.last: Optional[dict] = None
+
+    @staticmethod
+    def _copy(s: dict, rows) -> dict:
+        out = {k: np.array(s[k][rows]) for k in _Kept.KEYS}
+        out["effects"] = {k: np.array(v[rows]) for k, v in s["effects"].items()}
+        return out
+
+    def add(self, s: dict, commands: list) -> None:
+        n = s["t"].size
+        if self.chunks is not None:
+            self.chunks.append(self._copy(s, slice(None)))
+            self.commands.extend(commands)
+            self.bytes += sum(self.chunks[-1][k].nbytes for k in self.KEYS)
+            if self.bytes > self.keep_bytes:
+                self.chunks = self.commands = None  # from here on the bag holds them
+        pick = [i for i in range(n) if (self.seen + i) % self.stride == 0]
+        if pick:
+            self.preview.append(self._copy(s, pick))
+        self.seen += n
+        self.last = self._copy(s, slice(n - 1, n))
+        if sum(c["t"].size for c in self.preview) >= PREVIEW_ROWS:
+            merged = self._join(self.preview)
+            self.preview = [self._copy_dict(merged, slice(None, None, 2))]
+            self.stride *= 2
+
+    @staticmethod
+    def _copy_dict(d: dict, rows) -> dict:
+        out = {k: d[k][rows] for k in _Kept.KEYS}
+        out["effects"] = {k: v[rows] for k, v in d["effects"].items()}
+        return out
+
+    @staticmethod
+    def _join(chunks: list) -> dict:
+        out = {k: np.concatenate([c[k] for c in chunks]) for k in _Kept.KEYS}
+        out["effects"] = {k: np.concatenate([c["effects"][k] for c in chunks]) for k in chunks[0]["effects"]}
+        return out
+
+    def series(self, chunks: list) -> dict:
+        """RunResult fields of joined rows."""
+        d = self._join(chunks)
+        return {"t": d["t"], "L": d["L"], "q": d["q"], "omega_b": d["omega_b"], "torque": d["torque"],
+                "energy": d["energy"], "current": d["current"], "field_rate": d["rate"], "field_phase": d["phase"],
+                "modes": d["modes"], "effects": d["effects"]}
+
+    def preview_series(self) -> dict:
+        rows = list(self.preview)
+        if self.last is not None and (not rows or rows[-1]["t"][-1] != self.last["t"][-1]):
+            rows.append(self.last)
+        return self.series(rows)
+
+
+class _StreamOrder:
+    """Writes a run's samples and applied commands to a :class:`BagRecorder` in the order :func:`record_result`
+    writes them: a command before every sample later than it (a sample at a command's instant was taken before
+    the command), commands at or after the run's end not at all."""
+
+    def __init__(self, rec: BagRecorder, names: Sequence[str]):
+        self.rec, self.names, self.pending = rec, list(names), []
+
+    def _command(self, c) -> None:
+        t, nm, cur, rate = c
+        self.rec.write_command(float(t), list(nm), _command_values(cur), _command_values(rate))
+
+    def write(self, s: dict, commands: list) -> None:
+        self.pending.extend(commands)
+        t = s["t"]
+        eff = s["effects"]
+        for i in range(t.size):
+            ti = float(t[i])
+            while self.pending and self.pending[0][0] < ti:
+                self._command(self.pending.pop(0))
+            self.rec.write_sample(ti, s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i], s["torque"][i],
+                                  self.names, s["current"][i], s["rate"][i], s["phase"][i],
+                                  {k: v[i] for k, v in eff.items()})
+
+    def finish(self, commands: list, t_end: float) -> None:
+        self.pending.extend(commands)
+        for c in self.pending:
+            if c[0] < t_end:
+                self._command(c)
+        self.pending = []
+
+
+def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] = None, on_samples=None,
+               extra: Optional[Mapping[str, Any]] = None, keep_bytes: int = KEEP_BYTES) -> "RunResult":
+    """Run a scene in-process and write its bag at ``path`` as it runs (the same bag :func:`record_result` writes
+    of the same run, message for message). Memory stays flat: the simulator holds a buffer of
+    :data:`STREAM_BUFFER_ROWS` output rows, the bag's open chunk is bounded (:data:`CHUNK_SPAN`,
+    :data:`CHUNK_WALL`), and the returned RunResult keeps its rows in memory up to ``keep_bytes``; beyond, it
+    reads them back from the bag when first used (without what bags do not hold in RunResult's form: ``modes``
+    then has no columns and ``effects`` is empty; read_bag gives the /gyro/effects channels) and
+    :meth:`RunResult.preview` gives a decimated copy.
+
+    The write target is checked before the run (:func:`check_write_target`). Ctrl-C, SIGTERM or SIGHUP close
+    the bag with everything up to the signal (``gyro_sim.end`` = ``interrupted: ...``) and re-raise
+    (:class:`RunInterrupted` for SIGTERM / SIGHUP, KeyboardInterrupt for Ctrl-C). A full disk closes the bag
+    with what fit and raises :class:`RecordingError`. ``on_samples(dict)`` is called with each chunk of rows.
+    A scene with ``fidelity`` other than ``full`` is run in memory and recorded when it ends."""
+    from .simulate import Runner, drive, kinetic_energy
+    from .simulate import RunResult as _RunResult
+
+    path = Path(path)
+    check_write_target(path)
+    if scene.fidelity != "full":
+        from .simulate import run as _run
+
+        result = _run(scene, duration, attitude=True)
+        record_result(result, path, extra)
+        return result
+    r = Runner(scene, duration, sample_breaks=True, attitude=True, buffer_rows=STREAM_BUFFER_ROWS)
+    kept = _Kept(keep_bytes)
+    ext = {"gyro_sim.planned_duration": repr(float(r.T))}
+    ext.update(extra or {})
+    names = list(r.sim.stator_names)
+    with sigterm_as_interrupt(), BagRecorder(path, scene_text(scene), scene.name, extra=ext,
+                                             static_tf=stator_frames(scene)) as rec:
+        order = _StreamOrder(rec, names)
+
+        def take(s: dict) -> None:
+            commands = r.take_commands()
+            order.write(s, commands)
+            kept.add(s, commands)
+            if on_samples is not None:
+                on_samples(s)
+
+        try:
+            drive(r, take, release=True)
+            order.finish(r.take_commands(), r.T)
+        finally:
+            if not rec.closed:
+                rec.set_custom("gyro_sim.steps", int(r.sim.steps))
+                rec.set_custom("gyro_sim.wall_time", float(r.wall_time))
+                rec.set_custom("gyro_sim.compile_time", float(r.compile_time))
+    known = dict(scene=scene, stator_names=names, wall_time=r.wall_time, compile_time=r.compile_time,
+                 steps=r.sim.steps, attitude=True)
+    if kept.chunks is not None:
+        return _RunResult(**known, **kept.series(kept.chunks), commands=kept.commands)
+    preview = _RunResult(**known, **kept.preview_series())
+    J = r.sim.J
+
+    def load() -> dict:
+        b = read_bag(path)
+        cmds = []
+        for t, c, v in zip(b.command_t.tolist(), b.command_current, b.command_rate):
+            ks = [k for k in range(len(b.stator_names)) if not (np.isnan(c[k]) and np.isnan(v[k]))]
+            cmds.append((t, [b.stator_names[k] for k in ks], [None if np.isnan(c[k]) else float(c[k]) for k in ks],
+                         [None if np.isnan(v[k]) else float(v[k]) for k in ks]))
+        return {"t": b.t, "L": b.L, "q": b.q, "omega_b": b.omega_b, "torque": b.torque,
+                "energy": kinetic_energy(J, b.omega_b), "current": b.current, "field_rate": b.rate,
+                "field_phase": b.phase, "modes": np.zeros((b.t.size, 0)),
+                "effects": {}, "commands": cmds, "_euler": b.euler}
+
+    return _RunResult.lazy(load, preview, **known)
 
 
 # --- reading ----------------------------------------------------------------------------------

@@ -116,6 +116,38 @@ class RunResult:
     effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
     attitude: bool = True  # whether q was integrated (integrates_attitude)
     _euler: Optional[np.ndarray] = field(default=None, repr=False)
+    _load: Optional[object] = field(default=None, repr=False, compare=False)  # see lazy()
+    _preview: Optional["RunResult"] = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def lazy(cls, load, preview: "RunResult", **known) -> "RunResult":
+        """A result whose time series are read when first used: ``load()`` returns them as a dict of fields
+        (a streamed run too long to keep in memory reads them back from its bag: :func:`gyro_sim.recording.
+        record_run`). ``known``: the fields known without reading (scene, stator_names, wall_time, steps, ...);
+        ``preview``: a decimated copy in memory (:meth:`preview`)."""
+        obj = cls.__new__(cls)
+        obj.__dict__.update({"averaged_segments": [], "averaged_models": [], "averaged_rhs_evaluations": 0,
+                             "attitude": True, "_euler": None}, **known)
+        obj._load, obj._preview = load, preview
+        return obj
+
+    def __getattr__(self, name: str):
+        # called only when an attribute is missing: the series of a lazy() result, read on first use
+        d = self.__dict__
+        load = d.get("_load")
+        if load is not None and not name.startswith("__"):
+            d["_load"] = None
+            d.update(load())
+            if name in d:
+                return d[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def preview(self) -> "RunResult":
+        """A result cheap to summarise and plot: this one when its series are in memory; for a :meth:`lazy` one
+        not read yet, the decimated copy kept during the run (every k-th output row and the last one, so
+        :meth:`summary` gives the same final values)."""
+        d = self.__dict__
+        return d["_preview"] if d.get("_load") is not None and d.get("_preview") is not None else self
 
     @property
     def euler(self) -> np.ndarray:
@@ -540,7 +572,8 @@ class Runner:
     """
 
     def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
-                 attitude: Optional[bool] = None, control_period: Optional[float] = None):
+                 attitude: Optional[bool] = None, control_period: Optional[float] = None,
+                 buffer_rows: Optional[int] = None):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
@@ -554,7 +587,7 @@ class Runner:
         self.period = control_period or controller_period(scene)
         ticks = (np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if self.period is not None
                  else np.zeros(0))
-        self._ticks = set(ticks.tolist())
+        self._ticks = ticks  # sorted, exact instants (s)
         # every controller tick is an output sample too: the controller (node) sees the published state
         self.t_out = t_out = merge_times(t_out, ticks)  # a tick is exact: a sample within round-off is it
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
@@ -565,9 +598,16 @@ class Runner:
         # (with an effect on the step plan is made afresh at every advance: the samples stay breaks)
         if self.sim.eff[effects.ON] != 0.0:
             sample_breaks = True
-        samples = set(t_out.tolist()) if sample_breaks else set()
-        self.breaks = sorted(samples | {c.time for c in self._cmds} | self._ticks | {T} | knots)
-        n = t_out.size
+        # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
+        self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0),
+                                                np.array([c.time for c in self._cmds], dtype=float), ticks,
+                                                np.array([T], dtype=float), np.array(sorted(knots), dtype=float)]))
+        # output rows held in memory: all of them, or a buffer of ``buffer_rows`` that release() empties (a
+        # streamed run: its rows go to a bag as they come, memory stays flat however long the run)
+        if buffer_rows is not None and buffer_rows < 2:
+            raise ValueError(f"buffer_rows = {buffer_rows}: must be at least 2")
+        n = t_out.size if buffer_rows is None else min(t_out.size, int(buffer_rows))
+        self._base = 0  # the output row (of the whole run) held in buffer row 0
         k = len(self.sim.stator_names)
         self.out_y = np.empty((n, self.sim.y.size))
         self.out_N = np.empty((n, 3))
@@ -589,7 +629,26 @@ class Runner:
     @property
     def is_control_tick(self) -> bool:
         """Whether the present time is a controller tick (commands are due before advancing)."""
-        return self.sim.t in self._ticks
+        t = self.sim.t
+        i = int(np.searchsorted(self._ticks, t))
+        return i < self._ticks.size and self._ticks[i] == t
+
+    def _buf(self, rows: slice) -> slice:
+        """Buffer rows of output rows ``rows`` (of the whole run); refused if :meth:`release` dropped them."""
+        if rows.start < self._base:
+            raise ValueError(f"output rows {rows.start}..{rows.stop}: rows before {self._base} were released")
+        return slice(rows.start - self._base, rows.stop - self._base)
+
+    def release(self) -> None:
+        """Forget the output rows written so far (the caller has taken them): the buffer starts afresh at the
+        present row, and commands logged so far are dropped (:meth:`take_commands` hands them over first)."""
+        self._base = self.row
+        self.command_log.clear()
+
+    def take_commands(self) -> list:
+        """The commands applied since the last call (or the start), ``(t, names, currents|None, rates|None)``."""
+        out, self.command_log[:] = list(self.command_log), []
+        return out
 
     def apply_scene_commands(self) -> None:
         """Apply the scene's scheduled commands due at or before the present time."""
@@ -607,7 +666,7 @@ class Runner:
         self.out_y[0], self.out_N[0] = self.sim.y, self.sim.torque()
         self.cur[0], self.rate[0], self.phase[0] = self.sim.current, self.sim.rate, self.sim.phase
         self.row = 1
-        if self.breaks and self.breaks[0] == 0.0:
+        if self.breaks.size and self.breaks[0] == 0.0:
             self._bi = 1
         return slice(0, 1)
 
@@ -639,7 +698,7 @@ class Runner:
         """Integrate to the next break (or to ``until`` if that comes first); returns the output rows written."""
         if self.row == 0:
             return self.record_initial()
-        tb = self.breaks[self._bi]
+        tb = float(self.breaks[self._bi])
         if until is not None and until < tb:
             tb = until
         else:
@@ -648,16 +707,19 @@ class Runner:
         sel = t_out[row:][t_out[row:] <= tb + 1e-12 * max(1.0, tb)]
         sim = self.sim
         t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
-        rows = slice(row, row + sel.size)
+        out = slice(row, row + sel.size)
+        rows = self._buf(out)
+        if rows.stop > self.out_y.shape[0]:
+            raise RuntimeError(f"output buffer of {self.out_y.shape[0]} rows is full: release() the rows taken")
         with CompileClock() as clock:
-            self.row = sim.advance(tb, sel, self.out_y, self.out_N, row)
+            self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
         self.wall_time += clock.wall
         self.compile_time += clock.compile
         self.cur[rows] = c0
         self.rate[rows] = r0
         self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
         self.apply_scene_commands()
-        return rows
+        return out
 
     # --- exact switching instants ------------------------------------------------------------
     def _snapshot(self) -> tuple:
@@ -705,7 +767,7 @@ class Runner:
             # so the same switch is never found twice
             dt = 1e-12 * max(1.0, hi_t)
             while (not np.any(np.sign(s0) * np.sign(switching(self.control_input())) < 0)
-                   and self.sim.t + dt < self.breaks[self._bi]):
+                   and self.sim.t + dt < float(self.breaks[self._bi])):
                 self.advance(until=self.sim.t + dt)
                 dt *= 2.0
             self.apply_commands(law(self.control_input()))
@@ -714,14 +776,16 @@ class Runner:
 
     def samples(self, rows: slice, euler: bool = True) -> dict:
         """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current,
-        rate, phase (without attitude: q and euler NaN, omega_b in the case frame)."""
+        rate, phase, modes, effects (without attitude: q and euler NaN, omega_b in the case frame). ``rows``: output rows of the
+        whole run (not yet released)."""
+        t_rows, rows = self.t_out[rows], self._buf(rows)
         L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
         extra = {}
         if not self.sim.attitude:
-            omega_b = self.sim.body_rates(self.t_out[rows], self.out_y[rows])
+            omega_b = self.sim.body_rates(t_rows, self.out_y[rows])
             energy = kinetic_energy(self.sim.J, omega_b)  # isotropic: frame-free
         elif self.sim.eff[effects.ON]:
-            t = self.t_out[rows]
+            t = t_rows
             omega_b = self.sim.body_rates(t, self.out_y[rows])
             energy = kinetic_energy(self.sim.J, omega_b)  # the rigid body's own
             extra = self.sim.effect_outputs(t, self.out_y[rows])
@@ -731,11 +795,15 @@ class Runner:
         eul = None
         if euler:
             eul = euler_angles(quat_to_matrix(q), L) if self.sim.attitude else np.full((L.shape[0], 3), np.nan)
-        return {"t": self.t_out[rows], "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
+        return {"t": t_rows, "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
                 "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
-                "effects": extra}
+                "modes": self.out_y[rows, 7:7 + 3 * self.sim.tau.size], "effects": extra}
 
     def result(self) -> RunResult:
+        """The whole run as a :class:`RunResult` (refused once rows were released: a streamed run's result is read
+        back from its bag)."""
+        if self._base:
+            raise RuntimeError("Runner.result: output rows were released (a streamed run); read its bag back")
         s = self.samples(slice(0, self.row), euler=False)
         return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"],
                          torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
@@ -754,25 +822,40 @@ def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitud
     given, is called with each new chunk of output rows (see :meth:`Runner.samples`). ``attitude``: None
     = the scene's ``output.attitude``, True = integrate it anyway (:func:`integrates_attitude`).
     """
-    from gyro_ctl.laws import make_law, make_switching
-
     if scene.fidelity != "full":
         from .fidelity import run_hybrid
 
         return run_hybrid(scene, duration)
     ctl = scene.controller
-    law = make_law(ctl) if ctl is not None else None
-    switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    switching = ctl is not None and ctl.sampling == "events"
     # samples are breaks where a caller acts on them, and where switching events are looked for between
     # breaks (the node does the same: the same events, the same bits)
-    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching is not None, attitude=attitude)
-    clock = CompileClock()
-    with clock:
-        while not r.done:
-            if r.row > 0 and law is not None and r.is_control_tick:
-                r.apply_commands(law(r.control_input()))
-            rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
-            if on_samples is not None and rows.stop > rows.start:
-                on_samples(r.samples(rows))
-    r.wall_time, r.compile_time = clock.wall, clock.compile
+    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching, attitude=attitude)
+    drive(r, on_samples)
     return r.result()
+
+
+def drive(r: Runner, on_samples=None, release: bool = False) -> None:
+    """Run a :class:`Runner` to its end with the scene's controller law (if any; at the exact switching instants
+    with ``sampling: events``), calling ``on_samples(dict)`` with each new chunk of output rows
+    (:meth:`Runner.samples`). ``release``: after each call the rows (and logged commands) are released, so
+    memory stays flat (a streamed run: the caller took them). ``r.wall_time`` / ``r.compile_time`` are set even
+    when the run is interrupted (KeyboardInterrupt), up to the interruption."""
+    from gyro_ctl.laws import make_law, make_switching
+
+    ctl = r.scene.controller
+    law = make_law(ctl) if ctl is not None else None
+    switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    clock = CompileClock()
+    try:
+        with clock:
+            while not r.done:
+                if r.row > 0 and law is not None and r.is_control_tick:
+                    r.apply_commands(law(r.control_input()))
+                rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
+                if on_samples is not None and rows.stop > rows.start:
+                    on_samples(r.samples(rows))
+                    if release:
+                        r.release()
+    finally:
+        r.wall_time, r.compile_time = clock.wall, clock.compile

@@ -67,6 +67,9 @@ class FakeRunResult:
             "realtime_factor": float(self.t[-1]) / self.wall_time,
         }
 
+    def preview(self) -> "FakeRunResult":  # (RunResult.preview: itself when in memory)
+        return self
+
 
 def fake_result(scene: FakeScene, duration: float | None = None, n: int = 2001,
                 stators=("x", "y", "z")) -> FakeRunResult:

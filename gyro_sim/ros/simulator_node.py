@@ -45,6 +45,7 @@ from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPI
 from ..compile_watch import announce_compiles, compile_seconds
 from ..faults import FaultConfig, Faults
 from ..scene import SceneError, load_scene
+from ..recording import STREAM_BUFFER_ROWS, RecordingError
 from ..simulate import Runner, controller_period
 from .common import (BUSY_POLL, make_executor, message_class, node_main, parse_command, qos_profile, take,
                      wait_for_matches)
@@ -314,8 +315,10 @@ class Loop:
     def new_run(self) -> None:
         """A fresh run of the scene from t = 0 (start, and gyro/reset)."""
         node = self.node
+        # a bounded buffer of output rows, released once published and recorded: memory stays flat however long
+        # the run
         self.runner = Runner(node.scene, self.p["duration"] or None, attitude=True,
-                             control_period=self.p["control_period"])
+                             control_period=self.p["control_period"], buffer_rows=STREAM_BUFFER_ROWS)
         self.names = list(self.runner.sim.stator_names)
         node.faults = Faults(node.fault_config, len(self.names)) if node.fault_config.active else None
         self.latest = None  # latest valid command (names, current, rate, stamp_ns)
@@ -611,12 +614,18 @@ class Loop:
                 if self.stop.is_set() and rows.stop == rows.start:
                     break
                 self.publish_samples(rows)
+                r.release()
                 self.diagnostics()
                 if p["progress"]:
                     self.show_progress()
                 if self.mode == "realtime":
                     self.wait_wall(r.sim.t / node.live["rate_factor"] - self.run_wall())
             return self.finish()
+        except RecordingError as exc:  # a full disk: the bag is closed with what fit; the run stops
+            self.recorder = None
+            node.get_logger().error(str(exc))
+            self.status(f"error: {exc}", warn=True)
+            return 1
         finally:
             if self.recorder is not None:
                 self.recorder.close()
@@ -691,7 +700,12 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     executor = make_executor()
     executor.add_node(node)
     try:
-        return Loop(node, stop, lambda timeout: executor.spin_once(timeout_sec=timeout)).run()
+        try:
+            loop = Loop(node, stop, lambda timeout: executor.spin_once(timeout_sec=timeout))
+        except (RecordingError, FileExistsError) as exc:  # the record target, checked before the run
+            print(f"simulator: error: {exc}", file=sys.stderr)
+            return 2
+        return loop.run()
     finally:
         executor.shutdown()
 
