@@ -323,7 +323,8 @@ def _cmd_run(args) -> int:
         if args.record is not None:
             # streamed: the bag is written as the run goes (a signal or a full disk leaves it closed with
             # everything up to then); it integrates the attitude whatever output.attitude says (/gyro/imu needs it)
-            result = record_run(scene, args.record, duration=args.duration, on_samples=progress)
+            # (keep_bytes=0: the summary and the plot need only its preview, so memory stays flat)
+            result = record_run(scene, args.record, duration=args.duration, on_samples=progress, keep_bytes=0)
         else:
             with sigterm_as_interrupt():
                 result = simulate.run(scene, duration=args.duration, on_samples=progress)

@@ -633,73 +633,94 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
 STREAM_BUFFER_ROWS = 4096
 #: a streamed run keeps its rows in memory for the RunResult up to this many bytes; beyond, the result reads
 #: its series back from the bag when first used (RunResult.lazy) and keeps a decimated preview
-KEEP_BYTES = 256 << 20
+KEEP_BYTES = 64 << 20
 #: rows of that preview (every k-th row, k doubling as the run goes on, and the last row)
-PREVIEW_ROWS = 20_000
+PREVIEW_ROWS = 10_000
+
+
+class _Rows:
+    """Output rows appended chunk by chunk into arrays that grow by doubling (a run sampled one row at a time
+    must not hold one small array per row)."""
+
+    def __init__(self):
+        self.n = 0
+        self.a: Optional[dict] = None
+
+    @staticmethod
+    def _fields(s: dict, rows) -> dict:
+        out = {k: np.asarray(s[k])[rows] for k in _Kept.KEYS}
+        out.update({"effects." + k: np.asarray(v)[rows] for k, v in s["effects"].items()})
+        return out
+
+    def append(self, s: dict, rows) -> None:
+        part = self._fields(s, rows)
+        m = part["t"].shape[0]
+        if self.a is None:
+            self.a = {k: np.empty((max(1024, m),) + v.shape[1:], v.dtype) for k, v in part.items()}
+        cap = self.a["t"].shape[0]
+        if self.n + m > cap:
+            cap = max(2 * cap, self.n + m)
+            for k, v in self.a.items():
+                grown = np.empty((cap,) + v.shape[1:], v.dtype)
+                grown[: self.n] = v[: self.n]
+                self.a[k] = grown
+        for k, v in part.items():
+            self.a[k][self.n: self.n + m] = v
+        self.n += m
+
+    @property
+    def nbytes(self) -> int:
+        return sum(v.nbytes for v in self.a.values()) if self.a else 0
+
+    def halve(self) -> None:
+        """Keep every other row (0, 2, 4, ...)."""
+        keep = (self.n + 1) // 2
+        for v in self.a.values():
+            v[:keep] = v[: self.n: 2].copy()
+        self.n = keep
+
+    def series(self, last: Optional["_Rows"] = None) -> dict:
+        """RunResult fields of the rows (and of ``last``'s rows after them if they are later)."""
+        a = {k: v[: self.n] for k, v in self.a.items()}
+        if last is not None and last.n and (not self.n or a["t"][-1] != last.a["t"][0]):
+            a = {k: np.concatenate([v, last.a[k][:1]]) for k, v in a.items()}
+        return {"t": a["t"], "L": a["L"], "q": a["q"], "omega_b": a["omega_b"], "torque": a["torque"],
+                "energy": a["energy"], "current": a["current"], "field_rate": a["rate"], "field_phase": a["phase"],
+                "modes": a["modes"], "effects": {k[8:]: v for k, v in a.items() if k.startswith("effects.")}}
 
 
 class _Kept:
-    """The output rows of a streamed run kept for its RunResult: all of them up to ``keep_bytes``, and always a
-    decimated preview (every ``stride``-th row; the stride doubles when the preview reaches PREVIEW_ROWS)."""
+    """The output rows of a streamed run kept for its RunResult: all of them up to ``keep_bytes`` (then none), and
+    always a decimated preview (every ``stride``-th row; the stride doubles when it reaches PREVIEW_ROWS) and the
+    last row."""
 
     KEYS = ("t", "L", "q", "omega_b", "torque", "energy", "current", "rate", "phase", "modes")
 
     def __init__(self, keep_bytes: int):
-        self.keep_bytes, self.bytes = keep_bytes, 0
-        self.chunks: Optional[list] = []
-        self.commands: Optional[list] = []
-        self.preview: list = []
+        self.keep_bytes = keep_bytes
+        self.rows: Optional[_Rows] = _Rows() if keep_bytes > 0 else None
+        self.commands: Optional[list] = [] if keep_bytes > 0 else None
+        self.preview, self.last = _Rows(), _Rows()
         self.stride, self.seen = 1, 0
-        self.last: Optional[dict] = None
-
-    @staticmethod
-    def _copy(s: dict, rows) -> dict:
-        out = {k: np.array(s[k][rows]) for k in _Kept.KEYS}
-        out["effects"] = {k: np.array(v[rows]) for k, v in s["effects"].items()}
-        return out
 
     def add(self, s: dict, commands: list) -> None:
         n = s["t"].size
-        if self.chunks is not None:
-            self.chunks.append(self._copy(s, slice(None)))
+        if not n:
+            return
+        if self.rows is not None:
+            self.rows.append(s, slice(None))
             self.commands.extend(commands)
-            self.bytes += sum(self.chunks[-1][k].nbytes for k in self.KEYS)
-            if self.bytes > self.keep_bytes:
-                self.chunks = self.commands = None  # from here on the bag holds them
-        pick = [i for i in range(n) if (self.seen + i) % self.stride == 0]
-        if pick:
-            self.preview.append(self._copy(s, pick))
+            if self.rows.nbytes > self.keep_bytes:
+                self.rows = self.commands = None  # from here on the bag holds them
+        first = (-self.seen) % self.stride
+        if first < n:
+            self.preview.append(s, slice(first, None, self.stride))
         self.seen += n
-        self.last = self._copy(s, slice(n - 1, n))
-        if sum(c["t"].size for c in self.preview) >= PREVIEW_ROWS:
-            merged = self._join(self.preview)
-            self.preview = [self._copy_dict(merged, slice(None, None, 2))]
+        self.last.n = 0
+        self.last.append(s, slice(n - 1, n))
+        if self.preview.n >= PREVIEW_ROWS:
+            self.preview.halve()
             self.stride *= 2
-
-    @staticmethod
-    def _copy_dict(d: dict, rows) -> dict:
-        out = {k: d[k][rows] for k in _Kept.KEYS}
-        out["effects"] = {k: v[rows] for k, v in d["effects"].items()}
-        return out
-
-    @staticmethod
-    def _join(chunks: list) -> dict:
-        out = {k: np.concatenate([c[k] for c in chunks]) for k in _Kept.KEYS}
-        out["effects"] = {k: np.concatenate([c["effects"][k] for c in chunks]) for k in chunks[0]["effects"]}
-        return out
-
-    def series(self, chunks: list) -> dict:
-        """RunResult fields of joined rows."""
-        d = self._join(chunks)
-        return {"t": d["t"], "L": d["L"], "q": d["q"], "omega_b": d["omega_b"], "torque": d["torque"],
-                "energy": d["energy"], "current": d["current"], "field_rate": d["rate"], "field_phase": d["phase"],
-                "modes": d["modes"], "effects": d["effects"]}
-
-    def preview_series(self) -> dict:
-        rows = list(self.preview)
-        if self.last is not None and (not rows or rows[-1]["t"][-1] != self.last["t"][-1]):
-            rows.append(self.last)
-        return self.series(rows)
 
 
 class _StreamOrder:
@@ -786,9 +807,9 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
                 rec.set_custom("gyro_sim.compile_time", float(r.compile_time))
     known = dict(scene=scene, stator_names=names, wall_time=r.wall_time, compile_time=r.compile_time,
                  steps=r.sim.steps, attitude=True)
-    if kept.chunks is not None:
-        return _RunResult(**known, **kept.series(kept.chunks), commands=kept.commands)
-    preview = _RunResult(**known, **kept.preview_series())
+    if kept.rows is not None:
+        return _RunResult(**known, **kept.rows.series(), commands=kept.commands)
+    preview = _RunResult(**known, **kept.preview.series(kept.last))
     J = r.sim.J
 
     def load() -> dict:
