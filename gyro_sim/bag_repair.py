@@ -464,8 +464,7 @@ def _describe(scan: _Scan, out: _Rebuilt, mcap_name: str) -> str:
     """What was dropped and kept, in words (custom_data ``gyro_sim.end`` and the report)."""
     dropped = scan.size - scan.kept_end
     if scan.data_end:
-        text = (f"the data section of {mcap_name} is whole: its summary and footer (the last {dropped} bytes) "
-                f"were missing or cut and are rebuilt")
+        text = f"the data section of {mcap_name} is whole; the {dropped} bytes after it (summary, footer) rebuilt"
     else:
         text = f"the recording was cut: the last {dropped} of {scan.size} bytes of {mcap_name} dropped: {scan.stop}"
     text += f"; {out.messages} messages in {scan.chunks} whole chunk(s) kept"
