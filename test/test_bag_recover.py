@@ -35,6 +35,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
 import gyro_sim
+import gyro_sim.messages
 from gyro_sim import cli
 from gyro_sim.bag_repair import NOT_CLOSED, RecoverError, mcap_closed, not_closed, recover_bag
 from gyro_sim.recording import read_bag, record_result, scene_text
@@ -455,6 +456,25 @@ def test_recover_command_then_info_and_plot(complete, tmp_path, capsys):
     assert err == (f"error: {bag}: nothing to recover: the bag is complete "
                    "(run.mcap is closed and metadata.yaml is there)\n")
     assert snapshot(bag) == before
+
+
+def test_recovered_run_re_simulates_bit_for_bit(complete, tmp_path, capsys):
+    """`gyro-sim replay --check` on a recovered real run (cut after a chunk that ends on a whole sample):
+    the embedded scene and the recorded commands give the recorded states to the bit."""
+    lay = complete["layout"]
+
+    def ends_on_a_whole_sample(cut):
+        msgs = expected_messages(lay, cut)
+        return set(gyro_sim.messages.STATE_TOPICS) <= {t for t, ns, _ in msgs if ns == msgs[-1][1]}
+    whole = [c["end"] for c in lay["chunks"][:-1] if ends_on_a_whole_sample(c["end"])]
+    assert whole, "no chunk of the fixture ends on a whole sample"
+    bag = crashed_copy(complete, tmp_path, whole[0] + 100)
+    assert cli.main(["replay", "--check", str(bag)]) == 2
+    assert "was not closed" in capsys.readouterr().err
+    assert cli.main(["bag", "recover", str(bag)]) == 0
+    capsys.readouterr()
+    assert cli.main(["replay", "--check", str(bag)]) == 0
+    assert "identical to the bit" in capsys.readouterr().out
 
 
 def test_recover_refuses_a_complete_bag(complete, tmp_path, capsys):
