@@ -7,6 +7,7 @@
     gyro-sim replay BAG [--rate F] [--wait-for-subscribers N]  publish a bag over ROS 2 with its timing;
                                     --check re-simulates it
     gyro-sim phase SCENE|BAG        (θ, φ) phase portrait over the averaged ψ-switching model
+    gyro-sim bag recover BAG        rebuild a bag whose recording was cut (kill -9, crash, power loss)
     gyro-sim bench [--quick]        work-precision benchmark (table + PNG)
     gyro-sim sweep SCENE|SWEEP ...  parameter sweeps and Monte Carlo on Dask
     gyro-sim flywheel-plan ...      wheel axis, turn and speed profile for a wanted attitude ([S]);
@@ -109,6 +110,19 @@ def build_parser() -> argparse.ArgumentParser:
     phase.add_argument("--duration", metavar="S", type=_positive_seconds, default=None)
     phase.add_argument("--out", metavar="PNG", type=Path, default=None, help="default: runs/<scene>_phase.png")
     phase.set_defaults(func=_cmd_phase)
+
+    bag = sub.add_parser("bag", help="bag tools: recover a recording that was cut",
+                         description="Tools for recorded bags.")
+    bag_sub = bag.add_subparsers(dest="bag_command", metavar="TOOL", required=True)
+    recover = bag_sub.add_parser(
+        "recover", help="rebuild a bag whose recording was cut (kill -9, crash or power loss)",
+        description="Rebuild BAG, a recording that was not closed (no metadata.yaml, an MCAP file without summary "
+                    "and footer), into a complete bag: every whole message is kept, the cut tail is dropped, "
+                    "custom_data says gyro_sim.end = interrupted: recovered (...). The damaged original stays "
+                    "as BAG/<name>.mcap.damaged (and an old metadata.yaml as metadata.yaml.damaged); a complete "
+                    "bag is refused. Details: gyro_sim/bag_repair.py.")
+    recover.add_argument("bag", metavar="BAG", type=Path, help="the bag directory")
+    recover.set_defaults(func=_cmd_bag_recover)
 
     # listed here for `gyro-sim --help`; main() hands their arguments to bench_main / sweep_main
     sub.add_parser("bench", help="work-precision benchmark (gyro-sim bench --help)", add_help=False)
@@ -427,13 +441,21 @@ def _bag_result(bag: Path):
     return res, summary, b, info
 
 
+def _unreadable(bag: Path, exc: Exception) -> int:
+    """The one error line for a bag that cannot be read: a recording that was not closed is named as
+    such, with the command that recovers it."""
+    from gyro_sim.bag_repair import not_closed_message
+
+    return _error(not_closed_message(bag) or f"cannot read the bag {bag}: {exc}")
+
+
 def _summarise_bag(bag: Path, png: Path) -> int:
     from gyro_sim import plotting
 
     try:
         res, summary, b, info = _bag_result(bag)
     except Exception as exc:  # a bag that cannot be read
-        return _error(f"cannot read the bag {bag}: {exc}")
+        return _unreadable(bag, exc)
     plotting.plot_run(res, png)
     _write(sys.stdout, format_summary(res.scene.name, summary, png))
     _write(sys.stdout, f"{'bag':<16}  {bag} ({info['message_count']} messages)\n")
@@ -448,7 +470,7 @@ def _cmd_info(args) -> int:
     try:
         info = bag_info(args.bag)
     except Exception as exc:
-        return _error(f"cannot read the bag {args.bag}: {exc}")
+        return _unreadable(args.bag, exc)
     rows = [("bag", info["path"]), ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
             ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
             ("duration", f"{info['duration']:.6g} s (from {info['start']:.6g} to {info['end']:.6g} s)"),
@@ -471,7 +493,7 @@ def _cmd_plot(args) -> int:
     try:
         res, _, _, _ = _bag_result(args.bag)
     except Exception as exc:
-        return _error(f"cannot read the bag {args.bag}: {exc}")
+        return _unreadable(args.bag, exc)
     png = args.out or args.bag / f"{res.scene.name}.png"
     plotting.plot_run(res, png)
     _write(sys.stdout, f"plot: {png}\n")
@@ -485,6 +507,10 @@ def _cmd_replay(args) -> int:
         return _error(f"--rate {args.rate}: must be a positive number")
     if args.wait_for_subscribers < 0:
         return _error(f"--wait-for-subscribers {args.wait_for_subscribers}: must be an integer ≥ 0")
+    from gyro_sim.bag_repair import not_closed_message
+
+    if (cut := not_closed_message(args.bag)) is not None:  # (neither the re-run nor the player could read it)
+        return _error(cut)
     if args.check:
         from gyro_sim.rerun import rerun_bag
         from gyro_sim.scene import SceneError
@@ -504,6 +530,40 @@ def _cmd_replay(args) -> int:
 
     return subprocess.call([sys.executable, "-m", "gyro_sim.ros.replay", str(args.bag), repr(float(args.rate)),
                             "--wait-for-subscribers", str(args.wait_for_subscribers)], env=ros_env())
+
+
+def _cmd_bag_recover(args) -> int:
+    from gyro_sim.bag_repair import RecoverError, recover_bag
+
+    try:
+        rep = recover_bag(args.bag)
+    except RecoverError as exc:
+        return _error(str(exc))
+    _write(sys.stdout, _format_recovery(rep))
+    return EXIT_OK
+
+
+def _format_recovery(rep: dict) -> str:
+    """What ``gyro-sim bag recover`` prints, from :func:`gyro_sim.bag_repair.recover_bag`'s report."""
+    span = (f"t = {rep['start_ns'] / 1e9:.6g} to {rep['end_ns'] / 1e9:.6g} s"
+            if rep["messages"] else "no time span")
+    used = sum(1 for _, n in rep["topics"].values() if n)
+    lines = [f"recovered {rep['path']}: {rep['messages']} messages on {used} of {len(rep['topics'])} topics, {span}",
+             f"  scene     {rep['scene_name']}" + ("" if rep["scene_found"] else " (no scene found in the bag)")]
+    if rep["cut"]:
+        lines.append(f"  dropped   the last {rep['dropped_bytes']} of {rep['size']} bytes: {rep['stop']}")
+    else:
+        lines.append(f"  dropped   no message: the data section is whole; the {rep['dropped_bytes']} bytes after it "
+                     "(summary, footer) are rebuilt")
+    for bad in rep["bad_chunks"]:
+        lines.append(f"  skipped   {bad}")
+    for kind, n in sorted(rep["not_copied"].items()):
+        lines.append(f"  not kept  {n} {kind} record(s) (not carried over by the rosbag2 writer)")
+    for old, aside in rep["set_aside"].items():
+        lines.append(f"  kept      the {'damaged' if old.endswith('.mcap') else 'old'} {old} as {aside}")
+    width = max((len(t) for t in rep["topics"]), default=0)
+    lines += [f"  {t:<{width}}  {ty:<34} {n:>8}" for t, (ty, n) in sorted(rep["topics"].items())]
+    return "".join(line + "\n" for line in lines)
 
 
 def _cmd_phase(args) -> int:
