@@ -65,8 +65,8 @@ from typing import TYPE_CHECKING, Any, BinaryIO, Callable, Iterator, Optional, U
 
 import yaml
 
-from .messages import TOPIC_SCENE
-from .recording import BAG_VERSION, CUSTOM_KEYS
+from .messages import TOPIC_KINETIC_MOMENT, TOPIC_SCENE
+from .recording import BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA
 
 if TYPE_CHECKING:  # pragma: no cover
     from mcap.records import Chunk, McapRecord
@@ -230,6 +230,7 @@ class _Scan:
     schemas: dict[int, Any] = field(default_factory=dict)
     channels: dict[int, Any] = field(default_factory=dict)
     rosbag2: Optional[dict] = None  # the rosbag2 metadata record (written at close), parsed
+    early: Optional[dict] = None  # the recorder's custom_data written at the start (EARLY_METADATA record)
 
 
 def _define(rec: "McapRecord", schemas: dict, channels: dict) -> None:
@@ -371,6 +372,8 @@ def _metadata(rec, scan: _Scan) -> None:
     """Note an MCAP metadata record: the ``rosbag2`` one is parsed, others are not carried over."""
     if rec.name == "rosbag2" and (info := _rosbag2_metadata(rec)) is not None:
         scan.rosbag2 = info
+    elif rec.name == EARLY_METADATA and isinstance(rec.metadata, dict):
+        scan.early = {"custom_data": dict(rec.metadata)}
     else:
         scan.not_copied["metadata"] += 1
 
@@ -411,6 +414,7 @@ class _Rebuilt:
         self.start_ns: Optional[int] = None
         self.end_ns: Optional[int] = None
         self.scene_text: Optional[str] = None
+        self.last_sample_ns: Optional[int] = None
 
     def channel(self, ch, schema) -> None:
         """Add a connection for an MCAP channel (its schema's definition, its QoS profiles)."""
@@ -439,6 +443,8 @@ class _Rebuilt:
         self.messages += 1
         self.start_ns = msg.log_time if self.start_ns is None else min(self.start_ns, msg.log_time)
         self.end_ns = msg.log_time if self.end_ns is None else max(self.end_ns, msg.log_time)
+        if conn.topic == TOPIC_KINETIC_MOMENT:  # the state samples' last time: gyro_sim.duration
+            self.last_sample_ns = max(self.last_sample_ns or 0, msg.log_time)
         if self.scene_text is None and conn.topic == TOPIC_SCENE and conn.msgtype == "std_msgs/msg/String":
             try:
                 self.scene_text = self.stores[msg.channel_id].deserialize_cdr(msg.data, conn.msgtype).data
@@ -476,7 +482,8 @@ def _describe(scan: _Scan, out: _Rebuilt, mcap_name: str) -> str:
 def _custom_data(scan: _Scan, out: _Rebuilt, bag: Path, what: str) -> dict[str, str]:
     """custom_data of the recovered bag (see the module docstring)."""
     custom: dict[str, str] = {}
-    for source in (_old_yaml_info(bag), scan.rosbag2):  # the record (written at close) wins
+    # the recorder's start-of-run record, then a metadata.yaml, then the rosbag2 record (written at close) wins
+    for source in (scan.early, _old_yaml_info(bag), scan.rosbag2):
         if source and isinstance(source.get("custom_data"), dict):
             custom.update({str(k): str(v) for k, v in source["custom_data"].items() if v is not None})
     scene = out.scene_text if out.scene_text is not None else custom.get(CUSTOM_KEYS["scene"])
@@ -484,6 +491,8 @@ def _custom_data(scan: _Scan, out: _Rebuilt, bag: Path, what: str) -> dict[str, 
         custom[CUSTOM_KEYS["scene"]] = scene
     if CUSTOM_KEYS["scene_name"] not in custom:
         custom[CUSTOM_KEYS["scene_name"]] = _scene_name(scene) or bag.name
+    if out.last_sample_ns is not None and not (scan.data_end and "gyro_sim.duration" in custom):
+        custom["gyro_sim.duration"] = repr(out.last_sample_ns / 1e9)  # the time the recovered samples reach, s
     recorded_end = custom.get(CUSTOM_KEYS["end"])
     if scan.data_end and recorded_end:
         custom[CUSTOM_KEYS["end"]] = f"{recorded_end}; recovered by gyro-sim bag recover ({what})"

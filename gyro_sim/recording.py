@@ -56,6 +56,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["BagRecorder", "BagData", "record_result", "record_run", "stator_frames", "scene_text", "read_bag", "bag_info",
            "sigterm_as_interrupt", "check_write_target", "RecordingError", "RunInterrupted", "exit_status",
+           "BagNotClosedError", "EARLY_METADATA",
            "BAG_VERSION", "CUSTOM_KEYS"]
 
 BAG_VERSION = 8  # rosbag2 metadata format version: the newest that ROS 2 Humble reads
@@ -67,6 +68,11 @@ CUSTOM_KEYS = {
     "scene": _PREFIX + "scene",
     "end": _PREFIX + "end",
 }
+
+#: name of the MCAP metadata record the recorder writes at the start of the file with its custom_data (all but
+#: ``gyro_sim.end``): a recording cut short (kill -9, crash) keeps them for ``gyro-sim bag recover``. Not indexed
+#: in the summary (readers of a closed bag see only the ``rosbag2`` record and metadata.yaml).
+EARLY_METADATA = "gyro_sim.custom_data"
 
 _TYPESTORE = None
 
@@ -301,6 +307,8 @@ class BagRecorder:
                 for topic, msgtype in TOPICS.items()
             }
             self._writer = writer
+            self._lock_file()
+            self._write_early(custom)
             self._hook_chunks()
             self._reserve(RESERVE_BYTES)
         except BaseException as e:
@@ -310,6 +318,28 @@ class BagRecorder:
             if isinstance(e, OSError) and not isinstance(e, RecordingError):
                 raise RecordingError(f"bag output {str(path)!r}: cannot start it: {e.strerror or e}") from None
             raise
+
+    def _lock_file(self) -> None:
+        """Hold an exclusive flock on the MCAP file while it is written (`gyro-sim bag recover` refuses a file a
+        recorder still holds; a file system without flock: no lock)."""
+        try:
+            import fcntl
+
+            fcntl.flock(self._writer.storage.bio.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except (ImportError, OSError):
+            pass
+
+    def _write_early(self, custom: Mapping[str, str]) -> None:
+        """The custom_data known at the start as an MCAP metadata record (:data:`EARLY_METADATA`) right after the
+        file header, written out at once: a recording cut short keeps them."""
+        from mcap.data_stream import RecordBuilder
+        from mcap.records import Metadata
+
+        builder = RecordBuilder()
+        Metadata(name=EARLY_METADATA, metadata=dict(custom)).write(builder)
+        bio = self._writer.storage.bio
+        bio.write(builder.end())
+        bio.flush()
 
     @staticmethod
     def _remove_new(path: Path, top: Path) -> None:
@@ -396,6 +426,7 @@ class BagRecorder:
             os.truncate(st.path, pos)
             st.bio = open(st.path, "r+b")
             st.bio.seek(pos)
+            self._lock_file()
             del st.chunks[nchunks:]
             st.channel_stats, st.message_start_time, st.message_end_time = dict(stats), t0, t1
             st.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
@@ -885,6 +916,18 @@ def _custom_data(reader, path: Path) -> dict:
     return {}
 
 
+class BagNotClosedError(ValueError):
+    """A bag whose recording was cut (kill -9, crash, power loss): the message says to run `gyro-sim bag recover`."""
+
+
+def _refuse_not_closed(path: Path) -> None:
+    from .bag_repair import not_closed_message
+
+    why = not_closed_message(path)
+    if why:
+        raise BagNotClosedError(why)
+
+
 def _ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
@@ -894,6 +937,7 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
     from rosbags.rosbag2 import Reader
 
     path = Path(path)
+    _refuse_not_closed(path)
     ts = _typestore()
     des = ts.deserialize_cdr
     acc: dict[str, tuple[list, list]] = {t: ([], []) for t in (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER,
@@ -996,6 +1040,7 @@ def bag_info(path: Union[str, os.PathLike]) -> dict:
     from rosbags.rosbag2 import Reader
 
     path = Path(path)
+    _refuse_not_closed(path)
     bag_version, storage = None, path.suffix.lstrip(".")
     if path.is_dir() and (path / "metadata.yaml").is_file():
         info = (yaml.safe_load((path / "metadata.yaml").read_text()) or {}).get("rosbag2_bagfile_information") or {}

@@ -71,7 +71,8 @@ def layout(path: Path) -> dict:
         f.seek(8)
         op, length = struct.unpack("<BQ", f.read(9))
     assert op == 0x01
-    return {"size": size, "header_end": 8 + 9 + length, "chunks": chunks,
+    # (the recorder's EARLY_METADATA record sits between the header and the first chunk)
+    return {"size": size, "header_end": 8 + 9 + length, "chunks": chunks, "early_end": chunks[0]["start"],
             "metadata": (meta.offset, meta.offset + meta.length) if meta else None,
             "data_end": meta.offset + meta.length if meta else None,
             "summary_start": footer.summary_start, "footer_start": size - 37,
@@ -162,6 +163,10 @@ def check_recovered(complete, bag: Path, want: list, cut: int, rep: dict) -> dic
     if cut >= lay["metadata"][1]:  # the rosbag2 record was written: all of the original custom_data is known
         assert {k: v for k, v in custom.items() if k != "gyro_sim.end"} == {
             k: v for k, v in orig["custom_data"].items() if k != "gyro_sim.end"}
+    elif cut >= lay["early_end"]:  # the recorder's start-of-run record: all but what is known at close
+        late = ("gyro_sim.end", "gyro_sim.duration")
+        assert {k: v for k, v in custom.items() if k not in late} == {
+            k: v for k, v in orig["custom_data"].items() if k not in late}
     else:
         assert "gyro_sim.version" not in custom
     damaged = bag / "run.mcap.damaged"
@@ -466,7 +471,9 @@ def test_recovered_run_re_simulates_bit_for_bit(complete, tmp_path, capsys):
     def ends_on_a_whole_sample(cut):
         msgs = expected_messages(lay, cut)
         return set(gyro_sim.messages.STATE_TOPICS) <= {t for t, ns, _ in msgs if ns == msgs[-1][1]}
-    whole = [c["end"] for c in lay["chunks"][:-1] if ends_on_a_whole_sample(c["end"])]
+    # (the recorder writes its first chunk out with the first sample, at t = 0: a chunk after it)
+    whole = [c["end"] for c in lay["chunks"][:-1]
+             if ends_on_a_whole_sample(c["end"]) and expected_messages(lay, c["end"])[-1][1] > 0]
     assert whole, "no chunk of the fixture ends on a whole sample"
     bag = crashed_copy(complete, tmp_path, whole[0] + 100)
     assert cli.main(["replay", "--check", str(bag)]) == 2

@@ -124,6 +124,15 @@ def test_kill_9_loses_at_most_the_open_chunk(tmp_path):
     print(f"\nkill -9: {len(spans)} chunks written whole, up to t = {covered:.6g} s; widest chunk {widest:.3g} s "
           f"(bound {CHUNK_SPAN} s + one sample)")
     assert widest <= CHUNK_SPAN + 0.01
+    # `info` names the remedy; `bag recover` rebuilds the bag with the custom_data written at the start
+    info = subprocess.run(GYRO_SIM + ["info", str(bag)], capture_output=True, text=True, timeout=300)
+    assert info.returncode == 2 and "gyro-sim bag recover" in info.stderr, info.stderr
+    rec = subprocess.run(GYRO_SIM + ["bag", "recover", str(bag)], capture_output=True, text=True, timeout=300)
+    assert rec.returncode == 0, rec.stderr
+    meta, data = _check_bag(bag)
+    assert meta["custom"]["gyro_sim.planned_duration"] == "100000.0" and meta["version"] == gyro_sim.__version__
+    assert meta["end_reason"].startswith("interrupted: recovered")
+    assert stamp_ns(covered) >= data.t_ns[-1] >= spans[-1][0]  # every whole chunk, up to its last sample
 
 
 def test_chunks_are_bounded_in_simulated_time(tmp_path):
