@@ -30,7 +30,8 @@ def _number(value: Any) -> Any:
 
 
 def real(**constraints: Any) -> Any:
-    """A finite float field (NaN and ±inf refused) with pydantic ``Field`` constraints (``gt``, ``ge``, ``lt``, ``le``); no bool, no text."""
+    """A finite float field (NaN and ±inf refused) with pydantic ``Field`` constraints (``gt``, ``ge``, ``lt``,
+    ``le``); no bool, no text."""
     return Annotated[float, BeforeValidator(_number), Field(allow_inf_nan=False, **constraints)]
 
 

@@ -1,7 +1,15 @@
 """Scene files: one YAML file (SI units) says everything about a run.
 
 A scene is loaded into typed, validated objects; a wrong scene is refused at load with
-one :class:`SceneError` whose message names the key, the value and what is allowed.
+one :class:`SceneError` whose message names the key, the value (previewed: at most 80 characters)
+and what is allowed; at most ``MAX_ERRORS`` (10) errors are listed, then how many more.
+
+Limits (refused at load, before the cost): the text is read by :func:`parse_scene_text`
+(:mod:`gyro_sim.scene_text`: at most 1 MiB of UTF-8, at most 100 YAML aliases, 250,000 nodes with
+aliases expanded, 50 levels of nesting, no key twice in a mapping; ``2.5e7`` and ``1e-3`` are numbers
+as in YAML 1.2); a number is a number (``current: on``, a boolean, and ``'2.5'``, a text, are refused);
+and a run's in-memory result may take at most ``MAX_RESULT_BYTES`` (4 GiB; the environment variable
+``GYRO_SIM_MAX_RESULT_BYTES`` overrides it; see :func:`result_size`).
 
 Format (all keys but ``rotor``, ``duration`` optional)::
 

@@ -24,11 +24,12 @@ import yaml
 from yaml.composer import Composer
 from yaml.constructor import SafeConstructor
 from yaml.events import AliasEvent
-from yaml.nodes import MappingNode, ScalarNode
+from yaml.nodes import ScalarNode
 from yaml.resolver import Resolver
 
 __all__ = ["SceneError", "MAX_SCENE_BYTES", "MAX_ALIASES", "MAX_NODES", "MAX_DEPTH", "PREVIEW_CHARS",
-           "clip", "preview", "read_scene_file", "decode_scene_bytes", "parse_scene_text", "dump_scene_data"]
+           "clip", "preview", "human_bytes", "read_scene_file", "decode_scene_bytes", "parse_scene_text",
+           "dump_scene_data"]
 
 MAX_SCENE_BYTES = 1 << 20  # bytes of a scene file (1 MiB: ~25,000 commands written one a line)
 MAX_ALIASES = 100  # uses of YAML aliases (*name) in one scene text
@@ -195,9 +196,10 @@ class _GuardedComposer(Composer):
             return node
         event = self.peek_event()
         self._count(1, event.start_mark)
-        outer_deepest, start = self._deepest, self._nodes - 1
+        start = self._nodes - 1
         self._depth += 1
         self._reach(self._depth, event.start_mark)
+        outer_deepest, self._deepest = self._deepest, self._depth  # the deepest level within this node
         node = super().compose_node(parent, index)
         if event.anchor is not None:
             self._anchored[id(node)] = (self._nodes - start, self._deepest - self._depth + 1)
