@@ -8,9 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .reorient import ReorientParams
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+from .numbers import Finite, NonNegative, Positive, real
 
 
 class _Strict(BaseModel):
@@ -39,7 +37,7 @@ class PsiSwitchingParams(_Strict):
     control_current: NonNegative
     spin_current: NonNegative
     spin_rate: Finite  # ν0, rad/s
-    dead_band: Annotated[float, Field(ge=0, lt=math.pi / 2, allow_inf_nan=False)] = 1e-3  # rad
+    dead_band: real(ge=0, lt=math.pi / 2) = 1e-3  # rad
 
     @model_validator(mode="after")
     def _distinct(self) -> "PsiSwitchingParams":
@@ -132,8 +130,9 @@ def unknown_stators(cfg: ControllerConfig, names) -> str:
     """'' if every stator the law of ``cfg`` names is one of ``names`` (the scene's stators), else the reason:
     the parameter, its value and the allowed names (one check for scene files and the controller node)."""
     names = list(names)
+    known = set(names)  # a hostile scene may name thousands: linear, not quadratic
     for pname, value, used in stator_parameters(cfg.params):
-        bad = [n for n in used if n not in names]
+        bad = [n for n in used if n not in known]
         if bad:
             return f"{pname} = {value!r}: stator {bad[0]!r} is not defined; allowed: {names or 'none defined'}"
     return ""

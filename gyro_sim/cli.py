@@ -573,10 +573,9 @@ def _cmd_phase(args) -> int:
     src = Path(args.source)
     try:
         if src.is_dir():
-            import yaml
-
             res, _, b, _ = _bag_result(src)
-            scene = scene_mod.scene_from_dict(yaml.safe_load(b.scene_text), where=f"{src} (embedded scene)")
+            where = f"{src} (embedded scene)"
+            scene = scene_mod.scene_from_dict(scene_mod.parse_scene_text(b.scene_text, where), where=where)
         else:
             from gyro_sim import simulate
 

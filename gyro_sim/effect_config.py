@@ -37,7 +37,8 @@ from typing import Annotated, Optional
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+from gyro_ctl.numbers import Finite, real
+
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
@@ -46,11 +47,16 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-def _unit(a: list[float], key: str) -> list[float]:
-    n = math.sqrt(sum(x * x for x in a))
+def unit_vector(a: list[float], key: str) -> list[float]:
+    """``a`` normalised; ValueError naming ``key`` for a zero vector. math.hypot: no overflow for 1e200 and no
+    underflow for 1e-200 (a sum of squares has both); a second division where the first left the length off 1
+    (subnormal components lose digits)."""
+    n = math.hypot(*a)
     if n == 0:
         raise ValueError(f"{key} = {a}: must be a non-zero vector")
-    return [x / n for x in a]
+    u = [x / n for x in a]
+    n = math.hypot(*u)
+    return u if abs(n - 1.0) < 1e-12 else [x / n for x in u]
 
 
 def _symmetric(m: Optional[list[list[float]]], key: str) -> Optional[list[list[float]]]:
@@ -75,7 +81,7 @@ class Unbalance(_Strict):
     @field_validator("vertical")
     @classmethod
     def _v(cls, a):
-        return _unit(a, "vertical")
+        return unit_vector(a, "vertical")
 
 
 class GasDrag(_Strict):
@@ -115,23 +121,23 @@ class Profile(_Strict):
 class Flywheel(_Strict):
     """[S]: internal flywheel of axial inertia J_f on the body axis a, speed Ω_f(t) relative to the body."""
 
-    inertia: Annotated[float, Field(gt=0, allow_inf_nan=False)]  # kg·m²
+    inertia: real(gt=0)  # kg·m²
     axis: Vec3
     profile: Profile = Profile(time=[0.0], speed=[0.0])
 
     @field_validator("axis")
     @classmethod
     def _a(cls, a):
-        return _unit(a, "axis")
+        return unit_vector(a, "axis")
 
 
 class Damper(_Strict):
     """[KLT] §1: point mass m at O1 = ρ x3 on an isotropic spring c with viscous friction δ."""
 
-    mass: Annotated[float, Field(gt=0, allow_inf_nan=False)]  # kg
-    radius: Annotated[float, Field(ge=0, allow_inf_nan=False)]  # m
-    stiffness: Annotated[float, Field(gt=0, allow_inf_nan=False)]  # N/m
-    damping: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # N·s/m
+    mass: real(gt=0)  # kg
+    radius: real(ge=0)  # m
+    stiffness: real(gt=0)  # N/m
+    damping: real(ge=0) = 0.0  # N·s/m
     offset: Vec3 = [0.0, 0.0, 0.0]  # initial displacement of the mass from O1, body frame, m
     velocity: Vec3 = [0.0, 0.0, 0.0]  # initial velocity relative to the body, m/s
 

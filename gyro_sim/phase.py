@@ -53,11 +53,9 @@ def _scene_of(data, scene):
     text = getattr(data, "scene_text", None)
     if text:
         try:
-            import yaml
+            from .scene import parse_scene_text, scene_from_dict
 
-            from .scene import scene_from_dict
-
-            return scene_from_dict(yaml.safe_load(text), where="(embedded scene)")
+            return scene_from_dict(parse_scene_text(text, "(embedded scene)"), where="(embedded scene)")
         except Exception:  # noqa: BLE001 - a bag with an unreadable scene: trajectory only
             return None
     return None

@@ -585,13 +585,13 @@ class BagRecorder:
 
 def scene_text(scene) -> str:
     """The scene's file text if the file still says exactly this scene, else a YAML dump of it."""
-    from .scene import SceneError, scene_from_dict
+    from .scene import SceneError, parse_scene_text, scene_from_dict
 
     src = getattr(scene, "source", None)
     if src:
         try:
             text = Path(src).read_text(encoding="utf-8")
-            again = scene_from_dict(yaml.safe_load(text), where=src, default_name=Path(src).stem)
+            again = scene_from_dict(parse_scene_text(text, src), where=src, default_name=Path(src).stem)
             if again.model_dump(exclude={"source"}) == scene.model_dump(exclude={"source"}):
                 return text
         except (OSError, UnicodeDecodeError, yaml.YAMLError, SceneError, AttributeError):

@@ -10,11 +10,10 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from .messages import stamp_ns
 from .recording import read_bag
-from .scene import SceneError, scene_from_dict
+from .scene import SceneError, parse_scene_text, scene_from_dict
 from .simulate import Runner
 
 
@@ -23,7 +22,8 @@ def rerun_bag(path) -> dict:
     b = read_bag(path)
     if not b.scene_text:
         raise SceneError(f"{path}: the bag holds no scene; it was not written by gyro_sim")
-    scene = scene_from_dict(yaml.safe_load(b.scene_text), where=f"{Path(path)} (embedded scene)")
+    where = f"{Path(path)} (embedded scene)"
+    scene = scene_from_dict(parse_scene_text(b.scene_text, where), where=where)
     period = b.custom.get("gyro_sim.control_period")  # the node's ticks (set for scenes without a controller too)
     runner = Runner(scene, float(b.t[-1]), attitude=True,  # bags are recorded with the attitude
                     control_period=float(period) if period else None)

@@ -1,7 +1,15 @@
 """Scene files: one YAML file (SI units) says everything about a run.
 
 A scene is loaded into typed, validated objects; a wrong scene is refused at load with
-one :class:`SceneError` whose message names the key, the value and what is allowed.
+one :class:`SceneError` whose message names the key, the value (previewed: at most 80 characters)
+and what is allowed; at most ``MAX_ERRORS`` (10) errors are listed, then how many more.
+
+Limits (refused at load, before the cost): the text is read by :func:`parse_scene_text`
+(:mod:`gyro_sim.scene_text`: at most 1 MiB of UTF-8, at most 100 YAML aliases, 250,000 nodes with
+aliases expanded, 50 levels of nesting, no key twice in a mapping; ``2.5e7`` and ``1e-3`` are numbers
+as in YAML 1.2); a number is a number (``current: on``, a boolean, and ``'2.5'``, a text, are refused);
+and a run's in-memory result may take at most ``MAX_RESULT_BYTES`` (4 GiB; the environment variable
+``GYRO_SIM_MAX_RESULT_BYTES`` overrides it; see :func:`result_size`).
 
 Format (all keys but ``rotor``, ``duration`` optional)::
 
@@ -69,28 +77,29 @@ made orthogonal to u_k; e2k = u_k × e1k. For u = z3 this gives e1 = z1, e2 = z2
 from __future__ import annotations
 
 import math
+import os
+from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origin
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator, model_validator
 
 from gyro_ctl.config import ControllerConfig, unknown_stators
+from gyro_ctl.numbers import Finite, NonNegative, Positive, count, real
 
-from .effect_config import Effects
+from .effect_config import Effects, unit_vector
+from .scene_text import SceneError, clip, human_bytes, parse_scene_text, preview, read_scene_file
 
-__all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir"]
+__all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir",
+           "parse_scene_text", "result_size", "max_result_bytes", "MAX_RESULT_BYTES"]
 
-
-class SceneError(ValueError):
-    """A scene that cannot be run: the message names the key, the value and what is allowed."""
-
-
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 MAX_WINDOW_SAMPLES = 1e7  # output samples one window may ask for (memory: ~1 kB each with 50 modes)
+MAX_WINDOWS = 100  # output windows of a scene (each one is merged into the sample times on its own)
+MAX_RESULT_BYTES = 4 << 30  # bytes a run's in-memory result may take (4 GiB); see max_result_bytes
+RESULT_BYTES_ENV = "GYRO_SIM_MAX_RESULT_BYTES"  # environment variable that overrides MAX_RESULT_BYTES
+MAX_ERRORS = 10  # validation errors a SceneError lists (then "... and K more errors")
+MAX_ERROR_LINE = 300  # characters of one listed error
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
 
@@ -102,9 +111,9 @@ class Conductor(_Strict):
     """Homogeneous non-magnetic spherical conductor of the rotor."""
 
     kind: Literal["thin_shell", "solid_sphere", "shell"]
-    outer_radius: Annotated[float, Field(ge=1e-6, le=10.0, allow_inf_nan=False)]  # m
-    conductivity: Annotated[float, Field(ge=1e-3, le=1e12, allow_inf_nan=False)]  # S/m (metals: 1e6–1e8)
-    thickness: Optional[Annotated[float, Field(ge=1e-9, allow_inf_nan=False)]] = None  # m
+    outer_radius: real(ge=1e-6, le=10.0)  # m
+    conductivity: real(ge=1e-3, le=1e12)  # S/m (metals: 1e6–1e8)
+    thickness: Optional[real(ge=1e-9)] = None  # m
 
     @model_validator(mode="after")
     def _thickness(self) -> "Conductor":
@@ -127,7 +136,7 @@ class Conductor(_Strict):
 
 
 class Rotor(_Strict):
-    inertia: Annotated[list[Annotated[float, Field(ge=1e-15, le=1e6, allow_inf_nan=False)]],
+    inertia: Annotated[list[real(ge=1e-15, le=1e6)],
                        Field(min_length=3, max_length=3)]  # kg·m²
     conductor: Optional[Conductor] = None
 
@@ -155,10 +164,7 @@ class Stator(_Strict):
     @field_validator("axis")
     @classmethod
     def _axis(cls, a: list[float]) -> list[float]:
-        n = math.sqrt(sum(x * x for x in a))
-        if n == 0:
-            raise ValueError(f"axis = {a}: must be a non-zero vector")
-        return [x / n for x in a]
+        return unit_vector(a, "axis")
 
 
 class FieldTerm(_Strict):
@@ -179,14 +185,14 @@ class Initial(_Strict):
     kinetic_moment: Optional[NonNegative] = None
     L_direction: Vec3 = [0.0, 0.0, 1.0]
     psi: Finite = 0.0
-    theta: Annotated[float, Field(ge=0, le=math.pi, allow_inf_nan=False)] = 0.0
+    theta: real(ge=0, le=math.pi) = 0.0
     phi: Finite = 0.0
 
     @model_validator(mode="after")
     def _one_magnitude(self) -> "Initial":
         if self.spin is not None and self.kinetic_moment is not None:
             raise ValueError("give either spin (rad/s, |L| = J3·spin) or kinetic_moment (N·m·s), not both")
-        if sum(x * x for x in self.L_direction) == 0:
+        if math.hypot(*self.L_direction) == 0:
             raise ValueError(f"L_direction = {self.L_direction}: must be a non-zero vector")
         return self
 
@@ -232,7 +238,16 @@ class Output(_Strict):
 
     rate: Positive = 100.0
     attitude: StrictBool = True
-    windows: list[OutputWindow] = []
+    windows: Annotated[list[OutputWindow], Field(max_length=MAX_WINDOWS)] = []
+
+    def sample_count(self, T: float) -> float:
+        """An upper bound on ``sample_times(T).size``, computed without allocating (T s may ask for 1e20
+        samples): the regular grid, T itself, and every window's samples as if no two coincided."""
+        n = T * self.rate + 2.0
+        for w in self.windows:
+            if w.start < T:
+                n += w.samples_within(T) + 1.0
+        return n
 
     def check_windows(self, T: float) -> None:
         """ValueError naming the window if one asks for more than ``MAX_WINDOW_SAMPLES`` within a run of T s."""
@@ -270,8 +285,8 @@ class Output(_Strict):
 
 class Integrator(_Strict):
     method: Literal["auto", "lawson8", "etdrk4", "frozen_flow"] = "auto"
-    steps_per_turn: Optional[Annotated[int, Field(ge=4, le=100000)]] = None  # default: 12 (lawson8), 48 (etdrk4)
-    rate_change: Optional[Annotated[float, Field(gt=0.0, le=0.1)]] = None  # frozen_flow; default 1e-4
+    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: 12 (lawson8), 48 (etdrk4)
+    rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow; default 1e-4
     max_step: Optional[Positive] = None
 
 
@@ -282,7 +297,7 @@ class Scene(_Strict):
     description: str = ""
     rotor: Rotor
     torque_model: Literal["none", "quasi_static", "lag"] = "lag"
-    modes: Annotated[int, Field(ge=1, le=500)] = 10
+    modes: count(ge=1, le=500) = 10
     stators: list[Stator] = []
     field: list[FieldTerm] = []
     commands: list[Command] = []
@@ -298,13 +313,15 @@ class Scene(_Strict):
     @model_validator(mode="after")
     def _consistent(self) -> "Scene":
         names = [s.name for s in self.stators]
-        dup = {n for n in names if names.count(n) > 1}
+        dup = sorted(n for n, k in Counter(names).items() if k > 1)
         if dup:
-            raise ValueError(f"stators: name {sorted(dup)[0]!r} is used twice; stator names must be unique")
+            raise ValueError(f"stators: name {preview(dup[0])} is used twice; stator names must be unique")
+        known = set(names)
         for i, c in enumerate(self.commands):
-            if c.stator not in names:
+            if c.stator not in known:
                 raise ValueError(
-                    f"commands.{i}.stator = {c.stator!r}: unknown stator; allowed: {names or 'none defined'}"
+                    f"commands.{i}.stator = {preview(c.stator)}: unknown stator; allowed: "
+                    f"{preview(names) if names else 'none defined'}"
                 )
             if c.current is None and c.rate is None:
                 raise ValueError(f"commands.{i}: a command sets current and/or rate; it has neither")
@@ -326,6 +343,7 @@ class Scene(_Strict):
                     f"use lawson8, etdrk4 or auto"
                 )
         self.output.check_windows(self.duration)
+        check_result_size(self)
         if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:
             raise ValueError(
                 f"torque_model = {self.torque_model!r} needs rotor.conductor; add one or set torque_model: none"
@@ -339,6 +357,64 @@ class Scene(_Strict):
 
     def stator_index(self, name: str) -> int:
         return [s.name for s in self.stators].index(name)
+
+
+# --- the memory a run's result takes --------------------------------------------------------
+
+def max_result_bytes() -> float:
+    """Bytes a scene's in-memory run result may take: :data:`MAX_RESULT_BYTES` (4 GiB), or the environment
+    variable ``GYRO_SIM_MAX_RESULT_BYTES`` (a number of bytes, e.g. ``8e9``) where it is set."""
+    env = os.environ.get(RESULT_BYTES_ENV, "").strip()
+    if not env:
+        return float(MAX_RESULT_BYTES)
+    try:
+        value = float(env)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise SceneError(f"{RESULT_BYTES_ENV} = {preview(env)}: must be a positive number of bytes (e.g. 8e9)")
+    return value
+
+
+def _eddy_modes(scene: "Scene") -> int:
+    """Eddy modes a run carries (3 states each): the lag model's modes of the conductor (one for a thin
+    shell, ``modes`` for a solid sphere or a shell), none without a conductor or with another torque model."""
+    cond = scene.rotor.conductor
+    if cond is None or scene.torque_model != "lag":
+        return 0
+    return 1 if cond.kind == "thin_shell" else scene.modes
+
+
+def result_size(scene: "Scene") -> tuple[float, float, int]:
+    """(output samples, controller ticks, bytes per row) of a run of ``scene`` to its ``duration``, counted
+    without allocating; the result takes at most (samples + ticks) × bytes per row.
+
+    Samples: an upper bound on the output instants (:meth:`Output.sample_count`: rate, duration, windows).
+    Ticks: duration / controller period (its ``period``, else the output period) + 1, 0 without a controller;
+    a tick logs a command, counted as one more row. Bytes per row: 8 bytes (float64) × (t 1 + L 3 + q 4 +
+    Ω 3 + torque 3 + energy 1 + Euler angles 3 + 3 per stator (current, rate, phase) + 3 per eddy mode) as
+    a :class:`gyro_sim.simulate.RunResult` holds them (the effects' outputs are not counted)."""
+    T = scene.duration
+    samples = scene.output.sample_count(T)
+    ticks = 0.0
+    if scene.controller is not None:  # the period of gyro_sim.simulate.controller_period
+        ticks = T / (scene.controller.period or 1.0 / scene.output.rate) + 1.0
+    row = 8 * (1 + 3 + 4 + 3 + 3 + 1 + 3 + 3 * len(scene.stators) + 3 * _eddy_modes(scene))
+    return samples, ticks, row
+
+
+def check_result_size(scene: "Scene") -> None:
+    """ValueError (one line: samples, bytes per sample, total, the limit and what to lower) if a run of
+    ``scene`` would hold more than :func:`max_result_bytes` in memory."""
+    samples, ticks, row = result_size(scene)
+    total, limit = (samples + ticks) * row, max_result_bytes()
+    if total > limit:
+        ctl = f" + {ticks:.3g} controller ticks" if ticks else ""
+        raise ValueError(
+            f"duration = {scene.duration:g} s at output.rate = {scene.output.rate:g} /s: a run would hold "
+            f"{samples:.3g} output samples{ctl} × {row} bytes = {total:.3g} bytes ({human_bytes(total)}) in "
+            f"memory; the limit is {limit:.3g} bytes ({human_bytes(limit)}, {RESULT_BYTES_ENV}): lower duration, "
+            f"output.rate or output.windows{', or raise controller.period' if ticks else ''}")
 
 
 # --- loading ------------------------------------------------------------------------------
@@ -363,8 +439,8 @@ def builtin_scenes() -> dict[str, Path]:
     if d.is_dir():
         for p in sorted(d.glob("*.yaml")):
             try:
-                data = yaml.safe_load(p.read_text())
-            except yaml.YAMLError:
+                data = parse_scene_text(read_scene_file(p), str(p))
+            except SceneError:
                 continue
             if isinstance(data, dict) and "rotor" in data:
                 out[p.stem] = p
@@ -391,26 +467,41 @@ def _model_at(model: type[BaseModel], loc: tuple) -> Optional[type[BaseModel]]:
     return cur if isinstance(cur, type) and issubclass(cur, BaseModel) else None
 
 
+def _loc_text(loc: tuple) -> str:
+    """A dotted key of a pydantic error location; a union member's tag (``function-after[…]``, ``list[…]``:
+    pydantic's, not the scene's) is left out and each part is previewed (a hostile key may be long)."""
+    parts = [p for p in loc if p != "__root__" and not (isinstance(p, str) and p.endswith("]") and "[" in p)]
+    return ".".join(p if isinstance(p, str) and len(p) <= 40 and p.isprintable() else preview(p, 40)
+                    if not isinstance(p, int) else str(p) for p in parts) or "(scene)"
+
+
+def _error_line(e: dict) -> str:
+    """One line of a validation error: the key, the value (previewed) and what is allowed."""
+    loc = tuple(x for x in e["loc"] if x != "__root__")
+    key = _loc_text(loc)
+    msg = e["msg"].removeprefix("Value error, ")
+    if e["type"] == "extra_forbidden":
+        owner = _model_at(Scene, loc)
+        allowed = sorted(k for k in owner.model_fields if k != "source") if owner else []
+        return f"{key}: unknown key; allowed keys here: {', '.join(allowed)}"
+    if e["type"] == "missing":
+        return f"{key}: required key is missing"
+    if e["type"] in ("value_error", "assertion_error"):
+        if key == "(scene)":
+            return msg
+        if " = " not in msg and not isinstance(e.get("input"), (dict, BaseModel)):
+            return f"{key} = {preview(e.get('input'))}: {msg}"  # a field's check that does not quote the value
+        return f"{key}: {msg}"
+    return f"{key} = {preview(e.get('input'))}: {msg}"
+
+
 def _format_errors(err: ValidationError, where: str) -> str:
-    lines = []
-    for e in err.errors():
-        loc = tuple(x for x in e["loc"] if x != "__root__")
-        key = ".".join(str(x) for x in loc) or "(scene)"
-        msg = e["msg"]
-        if msg.startswith("Value error, "):
-            msg = msg[len("Value error, "):]
-        if e["type"] == "extra_forbidden":
-            owner = _model_at(Scene, loc)
-            allowed = sorted(k for k in owner.model_fields if k != "source") if owner else []
-            lines.append(f"{key}: unknown key; allowed keys here: {', '.join(allowed)}")
-        elif e["type"] == "missing":
-            lines.append(f"{key}: required key is missing")
-        elif e["type"] in ("value_error", "assertion_error") and key != "(scene)" and "=" in msg:
-            lines.append(f"{key}: {msg}")
-        elif e["type"] in ("value_error",):
-            lines.append(f"{key}: {msg}" if key != "(scene)" else msg)
-        else:
-            lines.append(f"{key} = {e.get('input')!r}: {msg}")
+    """The message of a SceneError for a validation error: one line per error (each at most
+    :data:`MAX_ERROR_LINE` characters), at most :data:`MAX_ERRORS` of them, then '... and K more errors'."""
+    errors = err.errors(include_url=False, include_context=False)
+    lines = [clip(_error_line(e), MAX_ERROR_LINE) for e in errors[:MAX_ERRORS]]
+    if len(errors) > MAX_ERRORS:
+        lines.append(f"... and {len(errors) - MAX_ERRORS} more errors")
     head = f"invalid scene {where}" if where else "invalid scene"
     if len(lines) == 1:
         return f"{head}: {lines[0]}"
@@ -420,7 +511,8 @@ def _format_errors(err: ValidationError, where: str) -> str:
 def scene_from_dict(data: Any, where: str = "", default_name: str = "scene") -> Scene:
     """Validate a scene given as a dict (parsed YAML). Raises SceneError."""
     if not isinstance(data, dict):
-        raise SceneError(f"invalid scene {where}: the top level must be a mapping of keys, got {type(data).__name__}")
+        raise SceneError(f"invalid scene {where}: the top level must be a mapping of keys, got "
+                         f"{clip(type(data).__name__, 40)}")
     data = dict(data)
     data.setdefault("name", default_name)
     if "source" in data:
@@ -438,38 +530,52 @@ def load_scene(name_or_path: Union[str, Path], overrides: Optional[dict] = None)
     ``overrides`` maps dotted keys (``"initial.theta"``) to values applied before validation.
     """
     p = Path(name_or_path)
-    if not p.is_file():
+    try:
+        is_file = p.is_file()
+    except (OSError, ValueError):  # a name too long for the file system, a NUL in it
+        is_file = False
+    if not is_file:
         scenes = builtin_scenes()
         key = p.stem if p.suffix in (".yaml", ".yml") else str(name_or_path)
         if key in scenes and p.parent == Path("."):
             p = scenes[key]
         else:
             raise SceneError(
-                f"scene {str(name_or_path)!r}: no such file and no built-in scene of that name; "
+                f"scene {preview(str(name_or_path))}: no such file and no built-in scene of that name; "
                 f"built-in scenes: {', '.join(scenes) or 'none found'}"
             )
-    try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        raise SceneError(f"invalid scene {p}: not valid YAML: {e}") from None
+    data = parse_scene_text(read_scene_file(p), str(p))
     if overrides:
         data = apply_overrides(data, overrides)
     return scene_from_dict(data, where=str(p), default_name=p.stem)
 
 
 def apply_overrides(data: dict, overrides: dict) -> dict:
-    """Copy of ``data`` with dotted keys set (list items by index: ``stators.0.current``)."""
+    """Copy of ``data`` with dotted keys set (list items by index: ``stators.0.current``); missing mappings on
+    the way are made. SceneError naming the dotted key where a part cannot be followed (an index beyond
+    its list, a key below a value that is not a mapping)."""
     import copy
 
     out = copy.deepcopy(data)
     for dotted, value in overrides.items():
         cur = out
-        parts = dotted.split(".")
-        for part in parts[:-1]:
-            cur = cur[int(part)] if isinstance(cur, list) else cur.setdefault(part, {})
-        last = parts[-1]
-        if isinstance(cur, list):
-            cur[int(last)] = value
-        else:
-            cur[last] = value
+        parts = str(dotted).split(".")
+        for depth, part in enumerate(parts):
+            last = depth == len(parts) - 1
+            if isinstance(cur, list):
+                if not (part.isdigit() and int(part) < len(cur)):
+                    raise SceneError(f"override {preview(dotted)}: {preview(part)} is not an index of "
+                                     f"{'.'.join(parts[:depth]) or 'the scene'} ({len(cur)} items)")
+                if last:
+                    cur[int(part)] = value
+                else:
+                    cur = cur[int(part)]
+            elif isinstance(cur, dict):
+                if last:
+                    cur[part] = value
+                else:
+                    cur = cur.setdefault(part, {})
+            else:
+                raise SceneError(f"override {preview(dotted)}: {'.'.join(parts[:depth]) or 'the scene'} = "
+                                 f"{preview(cur)} is not a mapping or a list")
     return out

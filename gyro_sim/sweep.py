@@ -49,10 +49,10 @@ from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
-import yaml
 
 from . import __version__
 from .scene import SceneError, apply_overrides, builtin_scenes, config_dir, scene_from_dict
+from .scene_text import parse_scene_text, read_scene_file
 
 __all__ = [
     "SweepError", "Axis", "RandomVar", "Metric", "Variant", "SweepSpec", "SweepResult",
@@ -643,9 +643,9 @@ def _load_scene_ref(ref, base: Optional[Path]) -> tuple:
             raise SweepError(f"scene {str(ref)!r}: no such file and no built-in scene of that name; "
                              f"built-in scenes: {', '.join(scenes) or 'none found'}")
     try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        raise SweepError(f"invalid scene {p}: not valid YAML: {e}") from None
+        data = parse_scene_text(read_scene_file(p), str(p))
+    except SceneError as e:
+        raise SweepError(str(e)) from None
     if not isinstance(data, dict):
         raise SweepError(f"invalid scene {p}: the top level must be a mapping")
     return data, str(p), data.get("name", p.stem), str(ref)
@@ -708,9 +708,9 @@ def load_sweep(source: str | Path) -> SweepSpec:
             data, where, name, ref = _load_scene_ref(str(source), None)
             return SweepSpec(name=str(name), scene_data=data, scene_ref=ref, scene_where=where).check()
     try:
-        d = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        raise SweepError(f"invalid sweep {p}: not valid YAML: {e}") from None
+        d = parse_scene_text(read_scene_file(p, kind="sweep"), str(p), kind="sweep")
+    except SceneError as e:
+        raise SweepError(str(e)) from None
     if isinstance(d, dict) and "rotor" in d:  # a scene file
         data, where, name, ref = _load_scene_ref(str(p), None)
         return SweepSpec(name=str(name), scene_data=data, scene_ref=ref, scene_where=where).check()

@@ -292,18 +292,17 @@ def result_from_bag(bag, scene=None, duration: Optional[float] = None, control_p
     custom data.
     """
     import numpy as np
-    import yaml
 
     from .messages import stamp_ns
     from .recording import BagData, read_bag
-    from .scene import Scene, load_scene, scene_from_dict
+    from .scene import Scene, load_scene, parse_scene_text, scene_from_dict
     from .simulate import RunResult, Runner, kinetic_energy
 
     data = bag if isinstance(bag, BagData) else read_bag(bag)
     if scene is None:
         if not data.scene_text:
             raise ValueError("result_from_bag: the bag holds no scene; give scene=")
-        scene = scene_from_dict(yaml.safe_load(data.scene_text), where="the bag's scene",
+        scene = scene_from_dict(parse_scene_text(data.scene_text, "the bag's scene"), where="the bag's scene",
                                 default_name=data.scene_name or "scene")
     elif not isinstance(scene, Scene):
         scene = load_scene(scene)

@@ -207,9 +207,9 @@ def test_cli_run_without_attitude_and_recorded(tmp_path, capsys):
 
     from gyro_sim import cli
     from gyro_sim.recording import read_bag
-    from gyro_sim.scene import config_dir
+    from gyro_sim.scene import config_dir, parse_scene_text
 
-    data = yaml.safe_load((config_dir() / "spinup_thin_shell.yaml").read_text())
+    data = parse_scene_text((config_dir() / "spinup_thin_shell.yaml").read_text())
     data.update(duration=0.2, controller=None, output={"rate": 50.0, "attitude": False})
     data["rotor"]["inertia"] = [J, J, J]
     path = tmp_path / "iso.yaml"

@@ -51,7 +51,9 @@ def assert_bit_equal(a, b, what):
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     d = tmp_path_factory.mktemp("rec")
-    data = yaml.safe_load(Path(gyro_sim.load_scene("spinup_thin_shell").source).read_text())
+    from gyro_sim.scene import parse_scene_text
+
+    data = parse_scene_text(Path(gyro_sim.load_scene("spinup_thin_shell").source).read_text())
     data.pop("controller", None)  # open loop: the scene's commands alone drive the stators
     data.pop("commands", None)
     data["name"] = "spin_cmd"

@@ -9,14 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from pydantic import ValidationError
 from scipy.integrate import solve_ivp
 
 from gyro_ctl.reorient import (ReorientParams, averaged_gamma, averaged_rate, plan, reorient, scene_constants,
                                segment_program)
 from gyro_sim.closed_forms import quasi_static_mean_torque
-from gyro_sim.scene import SceneError, scene_from_dict
+from gyro_sim.scene import SceneError, parse_scene_text, scene_from_dict
 from gyro_sim.simulate import Runner, stator_triad
 
 SHELL = {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}
@@ -357,7 +356,7 @@ def test_error_shrinks_with_mu():
 
 def test_config_scene_reorient_L():
     """config/reorient_L.yaml: its params validate, repeat the scene's constants, plan, and run to the targets."""
-    data = yaml.safe_load(CONFIG.read_text())
+    data = parse_scene_text(CONFIG.read_text())
     ctl = data["controller"]
     assert ctl["law"] == "reorient"
     p = ReorientParams(**ctl["params"])

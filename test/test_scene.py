@@ -4,16 +4,15 @@ import math
 
 import numpy as np
 import pytest
-import yaml
 
-from gyro_sim.scene import SceneError, builtin_scenes, load_scene, scene_from_dict
+from gyro_sim.scene import SceneError, builtin_scenes, load_scene, parse_scene_text, scene_from_dict
 
 REQUIRED = {"spinup_thin_shell", "spinup_solid_sphere", "free_rotor", "constant_field",
             "pulsating_field", "rotating_field"}
 
 
 def base():
-    return yaml.safe_load(builtin_scenes()["spinup_thin_shell"].read_text())
+    return parse_scene_text(builtin_scenes()["spinup_thin_shell"].read_text())
 
 
 def test_builtin_scenes_load():

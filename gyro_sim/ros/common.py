@@ -4,14 +4,17 @@ from __future__ import annotations
 import importlib
 import itertools
 import math
+import numbers
 import signal
 import threading
 import time
+from collections import Counter
 from typing import Callable, Iterable, Optional
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..messages import QOS, stamp_ns
+from ..scene_text import clip, preview
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
@@ -56,37 +59,69 @@ def msg_time(header) -> float:
     return (header.stamp.sec * 1_000_000_000 + header.stamp.nanosec) * 1e-9
 
 
+#: characters of a refused command's reason (it goes to /gyro/status: a hostile message may name 100k stators)
+MAX_REASON = 240
+
+
 def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     """Check a /gyro/stator_commands JointState; ((names, currents, rates|None, stamp_ns), '') or (None, reason).
 
-    name: known stators, no repeats; effort (current, A): one finite value ≥ 0 per name;
+    name: known stators (texts), no repeats; effort (current, A): one finite value ≥ 0 per name;
     velocity (field rate, rad/s): empty (rates unchanged) or one finite value per name. A message with
-    no names and no values is a valid empty command (nothing changes).
+    no names and no values is a valid empty command (nothing changes). Numbers are real numbers (not
+    booleans). The reason is one line of at most :data:`MAX_REASON` characters quoting values by
+    :func:`gyro_sim.scene_text.preview`; a message with more names or values than there are stators is
+    refused on its lengths alone (its cost is bounded by the number of stators, not by the message).
     """
-    names = list(msg.name)
-    cur = list(msg.effort)
-    rate = list(msg.velocity)
     stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    why = _command_problem(msg, list(stators))
+    if why:
+        return None, clip(why, MAX_REASON)
+    names = list(msg.name)
     if not names:
-        if cur or rate:
-            return None, f"name is empty but effort/velocity are not; expected stator names from {stators}"
         return ([], [], None, stamp), ""  # an empty command: nothing changes (law 'hold')
-    unknown = [n for n in names if n not in stators]
+    rate = [float(r) for r in msg.velocity]
+    return (names, [float(c) for c in msg.effort], rate or None, stamp), ""
+
+
+def _is_real(x) -> bool:
+    """A real number, not a boolean (numpy's bool_ is no numbers.Real; Python's bool is)."""
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
+
+
+def _command_problem(msg, stators: list) -> str:
+    """'' if the command ``msg`` is valid for ``stators`` (see :func:`parse_command`), else the reason."""
+    n, n_cur, n_rate = len(msg.name), len(msg.effort), len(msg.velocity)
+    if n == 0:
+        if n_cur or n_rate:
+            return f"name is empty but effort/velocity are not; expected stator names from {preview(stators)}"
+        return ""
+    if n > len(stators):
+        return (f"name has {n} entries: more than the {len(stators)} stators {preview(stators)} (a stator is "
+                "named at most once)")
+    names = list(msg.name)
+    for i, name in enumerate(names):
+        if not isinstance(name, str):
+            return f"name[{i}] = {preview(name)}: a stator name is a text; allowed: {preview(stators)}"
+    known = set(stators)
+    unknown = [name for name in names if name not in known]
     if unknown:
-        return None, f"name = {names}: unknown stator {unknown[0]!r}; allowed: {stators}"
-    if len(set(names)) != len(names):
-        return None, f"name = {names}: a stator is named twice"
-    if len(cur) != len(names):
-        return None, f"effort = {cur}: one current (A) per name expected ({len(names)} names)"
-    for n, c in zip(names, cur):
-        if not (math.isfinite(c) and c >= 0):
-            return None, f"effort[{n}] = {c}: current must be finite and ≥ 0 A"
-    if rate and len(rate) != len(names):
-        return None, f"velocity = {rate}: empty or one rate (rad/s) per name expected"
-    for n, r in zip(names, rate):
-        if not math.isfinite(r):
-            return None, f"velocity[{n}] = {r}: field rate must be finite (rad/s)"
-    return (names, cur, rate or None, stamp), ""
+        return f"name = {preview(names)}: unknown stator {preview(unknown[0])}; allowed: {preview(stators)}"
+    twice = [name for name, k in Counter(names).items() if k > 1]
+    if twice:
+        return f"name = {preview(names)}: stator {preview(twice[0])} is named twice"
+    if n_cur != n:
+        return f"effort = {preview(list(msg.effort[:8]))}: one current (A) per name expected ({n} names, {n_cur} values)"
+    for name, c in zip(names, msg.effort):
+        if not (_is_real(c) and math.isfinite(c) and c >= 0):
+            return f"effort[{name}] = {preview(c)}: current must be finite and ≥ 0 A"
+    if n_rate and n_rate != n:
+        return (f"velocity = {preview(list(msg.velocity[:8]))}: empty or one rate (rad/s) per name expected "
+                f"({n} names, {n_rate} values)")
+    for name, r in zip(names, msg.velocity):
+        if not (_is_real(r) and math.isfinite(r)):
+            return f"velocity[{name}] = {preview(r)}: field rate must be finite (rad/s)"
+    return ""
 
 
 def wants_help(argv) -> bool:
