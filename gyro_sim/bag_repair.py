@@ -503,9 +503,11 @@ def _custom_data(scan: _Scan, out: _Rebuilt, bag: Path, what: str) -> dict[str, 
 
 def _scene_name(scene: Optional[str]) -> Optional[str]:
     """The ``name:`` of a scene file text, if it has one."""
+    from .scene_text import SceneError, parse_scene_text
+
     try:
-        data = yaml.safe_load(scene) if scene else None
-    except yaml.YAMLError:
+        data = parse_scene_text(scene) if scene else None
+    except SceneError:  # (a hostile or broken text: the name stays unknown)
         return None
     name = data.get("name") if isinstance(data, dict) else None
     return str(name) if name not in (None, "") else None

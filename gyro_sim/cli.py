@@ -423,9 +423,9 @@ def _bag_result(bag: Path):
     info = bag_info(bag)
     J = None
     try:
-        import yaml
+        from gyro_sim.scene_text import parse_scene_text
 
-        J = np.array(yaml.safe_load(b.scene_text)["rotor"]["inertia"], dtype=float)
+        J = np.array(parse_scene_text(b.scene_text)["rotor"]["inertia"], dtype=float)
     except Exception:
         pass
     energy = 0.5 * np.sum(b.omega_b**2 * J, axis=1) if J is not None else np.full(len(b.t), np.nan)

@@ -596,7 +596,9 @@ def scene_text(scene) -> str:
                 return text
         except (OSError, UnicodeDecodeError, yaml.YAMLError, SceneError, AttributeError):
             pass
-    return yaml.safe_dump(scene.model_dump(mode="json", exclude={"source"}), sort_keys=False, allow_unicode=True)
+    from .scene_text import dump_scene_data
+
+    return dump_scene_data(scene.model_dump(mode="json", exclude={"source"}))
 
 
 def _command_values(values: Sequence[Optional[float]]) -> Optional[list]:
