@@ -6,15 +6,17 @@ unless the caller's environment already sets it. ``ROS_DOMAIN_ID`` is passed thr
 Signals and lifetime (``gyro-sim run --ros``):
 
 * SIGINT or SIGTERM to the launcher, alone or with its process group (a terminal's Ctrl-C), is forwarded to both
-  nodes (a node that got the group's copy as well takes the second as the first). Each node ends its run, closes
+  nodes (a node that got the group's copy as well ignores the repeat). Each node ends its run, closes
   its bag (marked ``interrupted: signal SIGINT``/``SIGTERM``) and exits 130 / 143; the launcher waits for the
   simulator at most :data:`STOP_GRACE` s and for the controller :data:`CONTROLLER_GRACE` s, then, as a last
   resort, kills the node (SIGKILL) and says so on stderr (that bag may be unfinished).
 * The nodes do not outlive the launcher, even a SIGKILLed one, two ways: on Linux each node is started with
-  ``prctl(PR_SET_PDEATHSIG, SIGTERM)`` (ctypes, in the child between fork and exec): the kernel sends it SIGTERM
-  as soon as the launcher's thread that started it ends; and everywhere, ``GYRO_SIM_PARENT_PID`` in the node's
-  environment makes it watch its parent (:func:`gyro_sim.ros.common.watch_parent`: SIGTERM to itself within
-  0.5 s of the parent's end). Either way the node stops as on SIGTERM: its bag is closed, marked interrupted.
+  ``prctl(PR_SET_PDEATHSIG, SIGTERM)`` (ctypes, in the child between fork and exec: :func:`node_preexec`): the
+  kernel sends it SIGTERM as soon as the launcher's thread that started it ends; and everywhere,
+  ``GYRO_SIM_PARENT_PID`` in the node's environment makes it watch its parent
+  (:func:`gyro_sim.ros.common.watch_parent`: it looks every 0.5 s, then sends itself SIGTERM). Either way the node
+  stops as on SIGTERM: its bag is closed, marked interrupted.
+* A signal that comes while a node starts up ends it quietly (:data:`NODE_BOOT`), with 130 / 143.
 * :func:`launch` returns the simulator's exit status: 0 the run reached its end, 130 / 143 it was stopped by
   SIGINT / SIGTERM (also when the node was ended by the signal before it could handle it: -2 / -15 are given as
   130 / 143), anything else a failure (2: the node refused its scene or a parameter; negative: killed by that
@@ -60,33 +62,50 @@ def ros_env(domain_id: Optional[int] = None) -> dict:
     return env
 
 
+#: ``python -m MODULE ARGS`` for a node started by :func:`launch`, whose SIGINT/SIGTERM are blocked from the fork on
+#: (:func:`node_preexec`): here they get a handler that ends the process quietly with 130 / 143 and are unblocked
+#: (one that came meanwhile is delivered now); node_main (gyro_sim.ros.common) replaces that handler when it starts.
+#: So a Ctrl-C while a node starts up or imports ends it without a KeyboardInterrupt traceback.
+NODE_BOOT = ("import runpy, signal, sys\n"
+             "for s in (signal.SIGINT, signal.SIGTERM):\n"
+             "    signal.signal(s, lambda signum, frame: sys.exit(128 + signum))\n"
+             "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})\n"
+             "del sys.argv[0]\n"
+             "runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)\n")
+
+
 def node_command(module: str, params: dict) -> list[str]:
-    """``python -m module --ros-args -p k:=v ...`` with floats written as floats (ROS types them)."""
-    cmd = [sys.executable, "-m", module, "--ros-args"]
+    """``python -c NODE_BOOT module --ros-args -p k:=v ...`` (as ``python -m module``, see :data:`NODE_BOOT`) with
+    floats written as floats (ROS types them)."""
+    cmd = [sys.executable, "-c", NODE_BOOT, module, "--ros-args"]
     for k, v in params.items():
         cmd += ["-p", f"{k}:={float(v)!r}" if isinstance(v, float) else f"{k}:={v}"]
     return cmd
 
 
-def die_with_parent() -> Optional[Callable[[], None]]:
-    """A ``preexec_fn`` that makes the child get SIGTERM when this process (the thread calling Popen) ends, also by
-    SIGKILL: ``prctl(PR_SET_PDEATHSIG, SIGTERM)``, Linux only (None elsewhere, or without a usable libc: the nodes'
-    parent watch, :func:`gyro_sim.ros.common.watch_parent`, is the fallback). A child whose parent ended before the
-    call exits at once (status 143)."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        import ctypes
+def node_preexec() -> Callable[[], None]:
+    """The ``preexec_fn`` of a node (run in the child between fork and exec): SIGINT/SIGTERM blocked until
+    :data:`NODE_BOOT` unblocks them, and, on Linux, ``prctl(PR_SET_PDEATHSIG, SIGTERM)``: the child gets SIGTERM when
+    this process (the thread calling Popen) ends, also by SIGKILL (elsewhere, or without a usable libc, the nodes'
+    parent watch, :func:`gyro_sim.ros.common.watch_parent`, does it). A child whose parent ended before the prctl
+    exits at once (status 143)."""
+    prctl = None
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
 
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
+            prctl = ctypes.CDLL(None, use_errno=True).prctl
+        except (OSError, AttributeError):
+            prctl = None
     parent = os.getpid()
+    stop = set(STOP_SIGNALS)
 
-    def preexec() -> None:  # in the child, between fork and exec: nothing that could need a lock
-        prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
-        if os.getppid() != parent:
-            os._exit(128 + int(signal.SIGTERM))
+    def preexec() -> None:  # nothing here may need a lock another thread of the parent could hold
+        signal.pthread_sigmask(signal.SIG_BLOCK, stop)
+        if prctl is not None:
+            prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+            if os.getppid() != parent:
+                os._exit(128 + int(signal.SIGTERM))
 
     return preexec
 
@@ -167,7 +186,7 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
                   "progress": "true" if progress else "false"}
     if record:
         sim_params["record"] = str(Path(record).resolve())
-    preexec = die_with_parent()
+    preexec = node_preexec()
     procs: list[tuple[str, subprocess.Popen]] = []
     with _Signals() as sigs:
         try:
