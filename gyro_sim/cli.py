@@ -357,15 +357,23 @@ def _run_ros(args, scene, name) -> int:
     if stopped_by is None:
         return _error(f"the simulator node ended with status {code}"
                       + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))
-    if not (Path(bag) / "metadata.yaml").exists():  # stopped before the simulator opened (or could close) its bag
+    if not Path(bag).exists():  # stopped before the simulator opened its bag
         _write(sys.stderr, f"interrupted: {stopped_by} before the run started; nothing recorded\n")
+        return code
+    from gyro_sim.messages import TOPIC_KINETIC_MOMENT
+    from gyro_sim.recording import bag_info
+
+    try:
+        info = bag_info(bag)
+    except Exception as exc:  # (e.g. the node was killed while closing it)
+        return _error(f"cannot read the bag {bag}: {exc}")
+    if not info["topics"].get(TOPIC_KINETIC_MOMENT, {}).get("count"):  # stopped before the first sample
+        _write(sys.stderr, f"interrupted: {stopped_by} before the first sample; the bag {bag} holds none\n")
         return code
     status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
     if status != EXIT_OK:
         return status
-    from gyro_sim.recording import bag_info
-
-    _write(sys.stdout, f"{'end':<16}  {bag_info(bag)['end_reason']} (exit status {code})\n")
+    _write(sys.stdout, f"{'end':<16}  {info['end_reason']} (exit status {code})\n")
     return code
 
 
