@@ -185,6 +185,32 @@ def test_ctrl_c_on_the_process_group_gives_the_summary_and_130(procs, tmp_path):
 
 
 @needs_ros
+def test_ctrl_c_as_the_nodes_start_ends_quietly_with_130(procs, tmp_path):
+    """Ctrl-C as soon as both node processes exist (they are still importing, usually): 130, no traceback; the bag,
+    if the simulator had opened it by then, complete; else one line saying nothing was recorded."""
+    from gyro_sim.recording import bag_info
+
+    p, log, bag, out = ros_run(procs, tmp_path, *LONG)
+    end = time.monotonic() + START_TIMEOUT
+    nodes = []
+    while len(nodes) < 2 and time.monotonic() < end and p.poll() is None:
+        nodes = [c for c in psutil.Process(p.pid).children() if "_node" in " ".join(c.cmdline())]
+        time.sleep(0.01)
+    procs.extra += nodes
+    assert len(nodes) == 2, log.read_text()
+    os.killpg(p.pid, signal.SIGINT)
+    code = p.wait(timeout=END_TIMEOUT)
+    text = log.read_text()
+    assert not wait_gone(nodes), text
+    assert code == 130 and "Traceback" not in text and "error:" not in text, text
+    if (bag / "metadata.yaml").exists():
+        assert bag_info(bag)["end_reason"] == "interrupted: signal SIGINT"
+        assert re.search(r"^end +interrupted: signal SIGINT \(exit status 130\)$", text, re.M), text
+    else:
+        assert text.strip().endswith("interrupted: SIGINT before the run started; nothing recorded"), text
+
+
+@needs_ros
 def test_sigkill_of_the_launcher_leaves_no_node_running(procs, tmp_path):
     p, log, bag, out, nodes = started_run(procs, tmp_path)
     os.kill(p.pid, signal.SIGKILL)
@@ -281,15 +307,16 @@ def test_the_parent_watch_stops_a_node_whose_parent_is_killed(procs, tmp_path):
 
 # --- the launcher's bounded waits (no ROS: stand-in nodes) ---------------------------------------------
 
-STUBBORN = textwrap.dedent("""
-    import signal, sys, time
+STAND_IN = textwrap.dedent("""
+    # a node stand-in, started as launch() starts a node (gyro_sim.ros.launch.NODE_BOOT): ARGS --ros-args -p who:=NAME
+    import os, signal, sys, time
     from pathlib import Path
-    if sys.argv[2] == "ignore":
+    if os.environ["STAND_IN"] == "ignore":
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, signal.SIG_IGN)
-    else:
-        signal.signal(signal.SIGINT, lambda *a: sys.exit(130))
-    Path(sys.argv[1]).touch()
+    else:  # NODE_BOOT's handler: exit 128 + signal
+        pass
+    Path(os.environ["STAND_IN_DIR"], sys.argv[-1].split(":=")[1]).touch()
     time.sleep(600)
 """)
 
@@ -301,25 +328,25 @@ def test_the_launcher_forwards_the_signal_and_kills_a_node_that_does_not_end(mon
     SIGKILLed after the bounded wait, and it says so; nodes that end on it give 130 and no such line."""
     from gyro_sim.ros import launch as launch_mod
 
-    started = []
-
-    def command(module, params):
-        ready = tmp_path / f"{module}.ready"
-        started.append(ready)
-        return [sys.executable, "-c", STUBBORN, str(ready), behaviour]
-
-    monkeypatch.setattr(launch_mod, "node_command", command)
+    (tmp_path / "stand_in_node.py").write_text(STAND_IN)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.setenv("STAND_IN", behaviour)
+    monkeypatch.setenv("STAND_IN_DIR", str(tmp_path))
+    real = launch_mod.node_command
+    monkeypatch.setattr(launch_mod, "node_command",
+                        lambda module, params: real("stand_in_node", {"who": module.rsplit(".", 1)[1]}))
     monkeypatch.setattr(launch_mod, "STOP_GRACE", 2.0)
     monkeypatch.setattr(launch_mod, "CONTROLLER_GRACE", 1.0)
+    ready = [tmp_path / "simulator_node", tmp_path / "controller_node"]
     pids = []
 
     def interrupt():  # once both stand-ins run: SIGINT to this process alone (the launcher)
         end = time.monotonic() + START_TIMEOUT
-        while time.monotonic() < end and not (len(started) == 2 and all(r.exists() for r in started)):
+        while time.monotonic() < end and not all(r.exists() for r in ready):
             time.sleep(0.05)
-        mine = [c for c in psutil.Process().children() if str(tmp_path) in " ".join(c.cmdline())]
+        mine = [c for c in psutil.Process().children() if "stand_in_node" in " ".join(c.cmdline())]
         pids.extend(c.pid for c in mine)
-        if len(started) == 2 and all(r.exists() for r in started):
+        if all(r.exists() for r in ready):
             os.kill(os.getpid(), signal.SIGINT)
         else:  # (they did not start: end them, so that launch() returns and the test fails)
             for c in mine:
@@ -338,7 +365,7 @@ def test_the_launcher_forwards_the_signal_and_kills_a_node_that_does_not_end(mon
             except ProcessLookupError:
                 pass
     err = capfd.readouterr().err
-    assert len(pids) == 2 and not any(psutil.pid_exists(pid) and alive(psutil.Process(pid)) for pid in pids)
+    assert len(pids) == 2 and not any(psutil.pid_exists(pid) and alive(psutil.Process(pid)) for pid in pids), err
     if behaviour == "ignore":
         assert code == -signal.SIGKILL, err
         assert "the simulator node did not end within 2 s of SIGINT: killed (SIGKILL); its bag may be unfinished" in err
@@ -346,3 +373,62 @@ def test_the_launcher_forwards_the_signal_and_kills_a_node_that_does_not_end(mon
     else:
         assert code == 130 and "SIGKILL" not in err, err
     assert signal.getsignal(signal.SIGINT) is handler  # the launcher's handlers are put back
+
+
+# --- the launch file (stub launch / launch_ros modules, as test_packaging.test_launch_file) ----------------
+
+def test_the_launch_file_gives_the_simulator_time_to_close_its_bag(monkeypatch):
+    from test_packaging import stub_module
+
+    from gyro_sim.ros.launch import STOP_GRACE
+
+    mods = {n: stub_module(n) for n in ("launch", "launch.actions", "launch.conditions", "launch.substitutions",
+                                        "launch_ros", "launch_ros.actions", "launch_ros.parameter_descriptions",
+                                        "launch_ros.substitutions")}
+    for n, m in mods.items():
+        monkeypatch.setitem(sys.modules, n, m)
+    spec = importlib.util.spec_from_file_location("gyro_sim_launch", ROOT / "launch/gyro_sim.launch.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    entities = list(mod.generate_launch_description().args[0])
+    sim, ctl = [e for e in entities if type(e) is mods["launch_ros.actions"].Node]
+    # ros2 launch: SIGINT (a terminal's, or its own), SIGTERM after sigterm_timeout, SIGKILL sigkill_timeout later
+    grace = float(sim.kwargs["sigterm_timeout"]) + float(sim.kwargs["sigkill_timeout"])
+    assert grace >= STOP_GRACE  # as long as gyro-sim run --ros waits
+    assert sim.kwargs["on_exit"] == mods["launch.actions"].Shutdown(reason="the simulator node ended")
+    assert "on_exit" not in ctl.kwargs  # (the controller ending alone does not end the run)
+
+
+# --- gyro-sim run --ros: what it says for each status of the simulator (launch() replaced) -------------------
+
+@needs_ros  # (gyro-sim run --ros refuses to start without rclpy)
+@pytest.mark.parametrize("case", ["no_bag", "no_samples", "killed", "refused"])
+def test_the_cli_reports_each_end_of_the_simulator(monkeypatch, tmp_path, capsys, case):
+    """Interrupted before the bag was opened or before the first sample: 130 and one line (no error, no traceback);
+    a simulator that had to be killed or refused its scene: an ``error:`` line with its status, exit 2."""
+    from gyro_sim import cli
+    from gyro_sim.recording import BagRecorder
+    from gyro_sim.ros import launch as launch_mod
+
+    bag = tmp_path / "bag"
+
+    def fake_launch(scene, **kw):
+        assert kw["record"] == str(bag)
+        if case == "no_samples":
+            rec = BagRecorder(bag, "scene: text\n", "spinup_thin_shell")
+            rec.interrupted("signal SIGINT")
+            rec.close()
+        return {"no_bag": 130, "no_samples": 130, "killed": -9, "refused": 2}[case]
+
+    monkeypatch.setattr(launch_mod, "launch", fake_launch)
+    code = cli.main(["run", "spinup_thin_shell", "--ros", "--record", str(bag), "--out", str(tmp_path / "out")])
+    out, err = capsys.readouterr()
+    assert out == ""
+    if case == "no_bag":
+        assert (code, err) == (130, "interrupted: SIGINT before the run started; nothing recorded\n")
+    elif case == "no_samples":
+        assert (code, err) == (130, f"interrupted: SIGINT before the first sample; the bag {bag} holds none\n")
+    elif case == "killed":
+        assert (code, err) == (2, "error: the simulator node ended with status -9 (SIGKILL)\n")
+    else:
+        assert (code, err) == (2, "error: the simulator node ended with status 2\n")
