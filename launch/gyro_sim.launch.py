@@ -11,7 +11,7 @@ Ending: the launch ends when the simulator node ends (its run is over, or it fai
 stopped. On Ctrl-C both nodes get SIGINT from the terminal and end cleanly: the simulator closes its bag (marked
 ``interrupted: signal SIGINT``) and exits 130, the controller too (ros2 launch reports a node's non-zero status as
 "process has died [..., exit code 130]": the run was interrupted, nothing was lost). ros2 launch escalates to
-SIGTERM after ``sigterm_timeout`` s (harmless: the nodes take it as the first signal) and to SIGKILL
+SIGTERM after ``sigterm_timeout`` s (harmless: a node already stopping ignores it) and to SIGKILL
 ``sigkill_timeout`` s later, which would leave the bag unfinished: the simulator gets :data:`SIM_SIGTERM_TIMEOUT`
 + :data:`SIM_SIGKILL_TIMEOUT` s (as ``gyro-sim run --ros``), the controller launch's defaults (5 + 5 s). A SIGKILL
 of ros2 launch itself leaves the nodes running (``gyro-sim run --ros`` does not: gyro_sim/ros/launch.py).

@@ -112,7 +112,8 @@ def node_preexec() -> Callable[[], None]:
 
 class _Signals:
     """SIGINT/SIGTERM received by this process, recorded (not raised) while the nodes run; the main thread only
-    (elsewhere Python delivers none: nothing is installed)."""
+    (elsewhere Python delivers none: nothing is installed). A signal this process was started ignoring (e.g. SIGINT
+    of a ``cmd &`` in a script) stays ignored."""
 
     def __init__(self):
         self.got: list[int] = []
@@ -121,7 +122,8 @@ class _Signals:
     def __enter__(self) -> "_Signals":
         if threading.current_thread() is threading.main_thread():
             for s in STOP_SIGNALS:
-                self.old[s] = signal.signal(s, lambda signum, frame: self.got.append(signum))
+                if signal.getsignal(s) is not signal.SIG_IGN:
+                    self.old[s] = signal.signal(s, lambda signum, frame: self.got.append(signum))
         return self
 
     def __exit__(self, *exc) -> None:
