@@ -48,6 +48,23 @@ def _positive_seconds(text: str) -> float:
     return value
 
 
+def _run_epilog() -> str:
+    from gyro_sim.ros.launch import CONTROLLER_GRACE, STOP_GRACE  # (no rclpy there)
+
+    return f"""\
+exit status:
+  0    the run reached its end (summary and plot written)
+  2    bad usage, a scene error, or (--ros) a node that failed: one 'error:' line
+  130  --ros, stopped by SIGINT (Ctrl-C)  }} the summary and plot of what was recorded;
+  143  --ros, stopped by SIGTERM          }} the bag is complete, marked interrupted
+
+with --ros: SIGINT/SIGTERM to gyro-sim (alone or with its process group) is passed to
+both nodes, which close the bag; a node still running {STOP_GRACE:g} s later (the controller:
+{CONTROLLER_GRACE:g} s) is killed (SIGKILL, said on stderr). The nodes die with gyro-sim, also if
+it is killed (SIGKILL): they get SIGTERM and close the bag (gyro_sim/ros/launch.py).
+"""
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gyro-sim",
@@ -59,8 +76,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser(
         "run",
         help="simulate a scene, print a summary and write a plot",
-        description="Simulate SCENE, print a summary of the final state and write "
+        description="Simulate SCENE, print a summary of the final state and write\n"
                     "DIR/<scene>.png (spin rate, nutation angle, stator currents).",
+        epilog=_run_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument("scene", metavar="SCENE",
                      help="a built-in scene name (see 'gyro-sim scenes') or a path to a scene YAML file")
@@ -397,7 +416,9 @@ def _unwritable_out(out: Path):
 
 
 def _run_ros(args, scene, name) -> int:
-    """Both nodes as processes over DDS; the bag they record is summarised and plotted."""
+    """Both nodes as processes over DDS; the bag they record is summarised and plotted, also that of a run stopped by
+    SIGINT/SIGTERM (exit status 130/143; see gyro_sim.ros.launch for the signals)."""
+    import signal
     import time
 
     from gyro_sim.ros.launch import launch
@@ -406,9 +427,30 @@ def _run_ros(args, scene, name) -> int:
     src = scene.source or args.scene
     code = launch(src, mode=args.mode, record=str(bag), duration=args.duration, rate_factor=args.rate_factor,
                   with_controller=scene.controller is not None)
-    if code != 0:
-        return _error(f"the simulator node ended with status {code}")
-    return _summarise_bag(bag, Path(args.out) / f"{name}.png")
+    if code == 0:
+        return _summarise_bag(bag, Path(args.out) / f"{name}.png")
+    stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM)}.get(code)
+    if stopped_by is None:
+        return _error(f"the simulator node ended with status {code}"
+                      + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))
+    if not Path(bag).exists():  # stopped before the simulator opened its bag
+        _write(sys.stderr, f"interrupted: {stopped_by} before the run started; nothing recorded\n")
+        return code
+    from gyro_sim.messages import TOPIC_KINETIC_MOMENT
+    from gyro_sim.recording import bag_info
+
+    try:
+        info = bag_info(bag)
+    except Exception as exc:  # (e.g. the node was killed while closing it)
+        return _error(f"cannot read the bag {bag}: {exc}")
+    if not info["topics"].get(TOPIC_KINETIC_MOMENT, {}).get("count"):  # stopped before the first sample
+        _write(sys.stderr, f"interrupted: {stopped_by} before the first sample; the bag {bag} holds none\n")
+        return code
+    status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
+    if status != EXIT_OK:
+        return status
+    _write(sys.stdout, f"{'end':<16}  {info['end_reason']} (exit status {code})\n")
+    return code
 
 
 def _bag_result(bag: Path):

@@ -6,9 +6,18 @@
 DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) unless the environment sets
 ROS_AUTOMATIC_DISCOVERY_RANGE, as with ``gyro-sim run --ros``. The launch arguments override the
 parameter files' values.
+
+Ending: the launch ends when the simulator node ends (its run is over, or it failed): the controller is then
+stopped. On Ctrl-C both nodes get SIGINT from the terminal and end cleanly: the simulator closes its bag (marked
+``interrupted: signal SIGINT``) and exits 130, the controller too (ros2 launch reports a node's non-zero status as
+"process has died [..., exit code 130]": the run was interrupted, nothing was lost). ros2 launch escalates to
+SIGTERM after ``sigterm_timeout`` s (harmless: a node already stopping ignores it) and to SIGKILL
+``sigkill_timeout`` s later, which would leave the bag unfinished: the simulator gets :data:`SIM_SIGTERM_TIMEOUT`
++ :data:`SIM_SIGKILL_TIMEOUT` s (as ``gyro-sim run --ros``), the controller launch's defaults (5 + 5 s). A SIGKILL
+of ros2 launch itself leaves the nodes running (``gyro-sim run --ros`` does not: gyro_sim/ros/launch.py).
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
+from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable, Shutdown
 from launch.conditions import IfCondition
 from launch.substitutions import EnvironmentVariable, LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
@@ -16,6 +25,9 @@ from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
 DISCOVERY_RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+#: s from the shutdown's SIGINT to SIGTERM, and from SIGTERM to SIGKILL, for the simulator: time to close a long
+#: run's bag on a loaded machine (in all 30 s, gyro_sim.ros.launch.STOP_GRACE)
+SIM_SIGTERM_TIMEOUT, SIM_SIGKILL_TIMEOUT = "10", "20"
 ARGUMENTS = (  # name, default, description
     ("scene", "nutation_oblate", "built-in scene name or scene YAML path (both nodes)"),
     ("mode", "lockstep", "simulator timing mode: lockstep, realtime or freerun"),
@@ -43,7 +55,9 @@ def generate_launch_description():
         SetEnvironmentVariable(DISCOVERY_RANGE, EnvironmentVariable(DISCOVERY_RANGE, default_value="LOCALHOST")),
         Node(package="gyro_sim", executable="simulator", name="gyro_simulator", namespace=ns, output="screen",
              parameters=[_params_file("simulator.params.yaml"),
-                         {"scene": _text("scene"), "mode": _text("mode"), "record": _text("record")}]),
+                         {"scene": _text("scene"), "mode": _text("mode"), "record": _text("record")}],
+             sigterm_timeout=SIM_SIGTERM_TIMEOUT, sigkill_timeout=SIM_SIGKILL_TIMEOUT,
+             on_exit=Shutdown(reason="the simulator node ended")),
         Node(package="gyro_ctl", executable="controller", name="gyro_controller", namespace=ns, output="screen",
              parameters=[_params_file("controller.params.yaml"), {"scene": _text("scene")}],
              condition=IfCondition(LaunchConfiguration("use_controller"))),

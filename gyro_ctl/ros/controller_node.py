@@ -6,6 +6,9 @@ stamp (lockstep simulators wait for exactly that stamp). The law and its paramet
 scene's ``controller`` section and can be overridden by ROS parameters (also at run time with
 ``ros2 param set``); a value that does not validate, a stator the scene does not have, or a parameter
 of a law not in force is refused with the reason. The parameters always show what is in force.
+
+The node runs until it is stopped: SIGINT or SIGTERM ends it cleanly (its last commands flushed) with exit status
+130 or 143 (:func:`gyro_sim.ros.common.node_main`); 2: a refused scene or parameter (one ``controller: error:`` line).
 """
 from __future__ import annotations
 
@@ -321,7 +324,7 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
     import os
     import time
 
-    from gyro_sim.ros.common import BUSY_POLL, make_executor, take
+    from gyro_sim.ros.common import BUSY_POLL, exit_status, make_executor, take
 
     executor = make_executor()
     executor.add_node(node)
@@ -345,7 +348,7 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
             next_spin = time.perf_counter() + 0.05
     finally:
         executor.shutdown()
-    return 0
+    return exit_status(stop)  # 130 / 143: stopped by SIGINT / SIGTERM (0: the context was shut down otherwise)
 
 
 def usage() -> str:

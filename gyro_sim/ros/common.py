@@ -15,6 +15,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ..messages import QOS, stamp_ns
 from ..scene_text import clip, preview
+from .launch import PARENT_PID_ENV, STOP_SIGNALS, signal_name  # (launch.py: no rclpy)
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
@@ -143,9 +144,18 @@ def node_usage(command: str, params: Iterable = ()) -> str:
 
 
 def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optional[str] = None) -> int:
-    """Run a node process: rclpy without its signal handlers (SIGINT/SIGTERM set ``stop`` instead),
-    ``build()`` the node (a SceneError or a refused parameter ends it with one ``who: error:`` line,
-    status 2), then ``loop(node, stop)``; always cleans up.
+    """Run a node process: rclpy without its signal handlers (SIGINT/SIGTERM set ``stop`` instead, see
+    :func:`stop_on_signals`), ``build()`` the node (a SceneError or a refused parameter ends it with one
+    ``who: error:`` line, status 2), then ``loop(node, stop)``, whose value is the exit status; always cleans up.
+
+    Exit status: the loop's: 0 a complete run, ``128 + n`` (130 SIGINT, 143 SIGTERM) a node stopped by signal
+    n (:func:`exit_status`), 2 a refused scene or parameter. The handlers stay installed until the node is torn
+    down (a second signal while the bag is closed, or the node destroyed, changes nothing); run as a program
+    (``args`` None), the process then ignores SIGINT/SIGTERM while it exits, so a late signal (e.g. the group's
+    Ctrl-C and a launcher's forwarded copy) cannot turn its status into -2 or -15.
+
+    With ``GYRO_SIM_PARENT_PID`` in the environment (``gyro-sim run --ros`` sets it), the node watches its parent
+    (:func:`watch_parent`) and stops as on SIGTERM when it is gone.
 
     ``-h``/``--help`` before ``--ros-args`` (in ``args``, default ``sys.argv``) prints ``usage`` (default: a
     :func:`node_usage` without parameters) and returns 0 without initialising rclpy."""
@@ -155,16 +165,19 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
         print(usage or node_usage(who), end="")
         return 0
 
-    import rclpy
-    from rclpy.exceptions import ParameterException
-
-    from ..scene import SceneError
-
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = threading.Event()
-    restore = stop_on_signals(stop)
+    stop = StopEvent()
+    restore = stop_on_signals(stop)  # first: a signal from here on ends the node cleanly
     node = None
     try:
+        import rclpy
+        from rclpy.exceptions import ParameterException
+
+        from ..scene import SceneError
+
+        # rclpy's own handlers (SignalHandlerOptions.ALL) would shut the context down on SIGINT/SIGTERM, under the
+        # loop, and chain to Python's SIGINT handler (KeyboardInterrupt): no clean end of the run, status -2
+        rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        watch_parent(stop)
         try:
             node = build()
         except (SceneError, ParameterException) as e:
@@ -172,12 +185,18 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
             return 2
         return loop(node, stop)
     finally:
-        restore()
-        if node is not None:
-            flush_publishers(node)
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        try:
+            if node is not None:
+                flush_publishers(node)
+                node.destroy_node()
+            rclpy = sys.modules.get("rclpy")
+            if rclpy is not None and rclpy.ok():
+                rclpy.shutdown()
+        finally:
+            if args is None:  # a process about to exit: nothing more to do on a signal
+                ignore_signals()
+            else:
+                restore()
 
 
 def wait_for_matches(node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0,
@@ -232,11 +251,33 @@ def flush_publishers(node, budget: float = 2.0) -> None:
         return
 
 
+PARENT_POLL = 0.5  # wall s between looks at the parent (watch_parent)
+
+
+class StopEvent(threading.Event):
+    """The event that ends a node's loop; ``signum``: the signal that set it (None: none, or not yet)."""
+
+    signum: Optional[int] = None
+
+
+def exit_status(stop: threading.Event) -> int:
+    """A node's exit status: 0 if ``stop`` is not set; ``128 + n`` if signal n set it (130 SIGINT, 143 SIGTERM,
+    as a shell reports a process killed by n, but after a clean end); 130 if it was set without a signal."""
+    if not stop.is_set():
+        return 0
+    signum = getattr(stop, "signum", None)
+    return 128 + int(signum) if signum else 128 + int(signal.SIGINT)
+
+
 def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
-    """SIGINT/SIGTERM set ``stop`` (the loop ends cleanly and closes its bag). Returns a restore function."""
-    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    """SIGINT/SIGTERM set ``stop`` (the loop ends cleanly and closes its bag) and, the first time, ``stop.signum``.
+    Returns a restore function. (Python runs the handler in the main thread, between bytecodes: a loop blocked in
+    the executor sees it when its wait times out.)"""
+    old = {s: signal.getsignal(s) for s in STOP_SIGNALS}
 
     def handler(signum, frame):
+        if getattr(stop, "signum", None) is None:
+            stop.signum = signum
         stop.set()
 
     for s in old:
@@ -244,10 +285,47 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
 
     def restore():
         for s, h in old.items():
-            signal.signal(s, h)
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
 
     return restore
 
 
+def ignore_signals() -> None:
+    """Ignore SIGINT/SIGTERM from here on (a process that is exiting: at finalisation Python puts its handlers back
+    to the default action, and a signal then would end it with status -2 / -15 after a clean run)."""
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+
+
+def watch_parent(stop: threading.Event, environ=None) -> Optional[threading.Thread]:
+    """If ``GYRO_SIM_PARENT_PID`` (in ``environ``, default ``os.environ``) names this process's parent: a daemon
+    thread that sends this process SIGTERM (a clean stop, see :func:`stop_on_signals`) once the parent is gone (its
+    parent pid changes: re-parented to init or a subreaper), looking every :data:`PARENT_POLL` s until ``stop`` is
+    set. The portable half of "the nodes die with ``gyro-sim run --ros``": on Linux the launcher also sets
+    PR_SET_PDEATHSIG (:mod:`gyro_sim.ros.launch`), which acts at once and also after a SIGKILL. Returns the thread
+    (None: no such variable, or the parent is already gone: then the SIGTERM is sent at once)."""
+    import os
+
+    value = (os.environ if environ is None else environ).get(PARENT_PID_ENV, "")
+    try:
+        parent = int(value)
+    except ValueError:
+        return None
+    if os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGTERM)
+        return None
+
+    def watch():
+        while not stop.wait(PARENT_POLL):
+            if os.getppid() != parent:
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+
+    t = threading.Thread(target=watch, name="gyro_sim-parent-watch", daemon=True)
+    t.start()
+    return t
+
+
 __all__ = ["message_class", "qos_profile", "msg_time", "take", "BUSY_POLL", "make_executor", "parse_command", "stop_on_signals", "node_main",
+           "StopEvent", "exit_status", "signal_name", "ignore_signals", "watch_parent", "STOP_SIGNALS", "PARENT_PID_ENV",
            "node_usage", "wants_help", "flush_publishers", "wait_for_matches", "stamp_ns"]

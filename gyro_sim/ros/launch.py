@@ -2,6 +2,25 @@
 
 DDS traffic stays on this machine by default: ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` is set
 unless the caller's environment already sets it. ``ROS_DOMAIN_ID`` is passed through.
+
+Signals and lifetime (``gyro-sim run --ros``):
+
+* SIGINT or SIGTERM to the launcher, alone or with its process group (a terminal's Ctrl-C), is forwarded to both
+  nodes (a node that got the group's copy as well ignores the repeat). Each node ends its run, closes
+  its bag (marked ``interrupted: signal SIGINT``/``SIGTERM``) and exits 130 / 143; the launcher waits for the
+  simulator at most :data:`STOP_GRACE` s and for the controller :data:`CONTROLLER_GRACE` s, then, as a last
+  resort, kills the node (SIGKILL) and says so on stderr (that bag may be unfinished).
+* The nodes do not outlive the launcher, even a SIGKILLed one, two ways: on Linux each node is started with
+  ``prctl(PR_SET_PDEATHSIG, SIGTERM)`` (ctypes, in the child between fork and exec: :func:`node_preexec`): the
+  kernel sends it SIGTERM as soon as the launcher's thread that started it ends; and everywhere,
+  ``GYRO_SIM_PARENT_PID`` in the node's environment makes it watch its parent
+  (:func:`gyro_sim.ros.common.watch_parent`: it looks every 0.5 s, then sends itself SIGTERM). Either way the node
+  stops as on SIGTERM: its bag is closed, marked interrupted.
+* A signal that comes while a node starts up ends it quietly (:data:`NODE_BOOT`), with 130 / 143.
+* :func:`launch` returns the simulator's exit status: 0 the run reached its end, 130 / 143 it was stopped by
+  SIGINT / SIGTERM (also when the node was ended by the signal before it could handle it: -2 / -15 are given as
+  130 / 143), anything else a failure (2: the node refused its scene or a parameter; negative: killed by that
+  signal).
 """
 from __future__ import annotations
 
@@ -9,8 +28,29 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
+
+#: SIGINT/SIGTERM: what stops the nodes (and ``gyro-sim run --ros``) cleanly
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: the environment variable naming the process a node must not outlive (:func:`gyro_sim.ros.common.watch_parent`)
+PARENT_PID_ENV = "GYRO_SIM_PARENT_PID"
+STOP_GRACE = 30.0  # wall s the simulator has, after a forwarded signal, to close its bag before SIGKILL
+CONTROLLER_GRACE = 10.0  # wall s the controller has to end after SIGINT/SIGTERM before SIGKILL
+POLL = 0.05  # wall s between looks at the nodes while waiting
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+
+
+def signal_name(signum: Optional[int]) -> str:
+    """'SIGINT' for 2 (the number for a signal without a name; 'stop' for None)."""
+    if signum is None:
+        return "stop"
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return f"signal {signum}"
 
 
 def ros_env(domain_id: Optional[int] = None) -> dict:
@@ -22,50 +62,175 @@ def ros_env(domain_id: Optional[int] = None) -> dict:
     return env
 
 
+#: ``python -m MODULE ARGS`` for a node started by :func:`launch`, whose SIGINT/SIGTERM are blocked from the fork on
+#: (:func:`node_preexec`): here they get a handler that ends the process quietly with 130 / 143 and are unblocked
+#: (one that came meanwhile is delivered now); node_main (gyro_sim.ros.common) replaces that handler when it starts.
+#: So a Ctrl-C while a node starts up or imports ends it without a KeyboardInterrupt traceback.
+NODE_BOOT = ("import runpy, signal, sys\n"
+             "for s in (signal.SIGINT, signal.SIGTERM):\n"
+             "    signal.signal(s, lambda signum, frame: sys.exit(128 + signum))\n"
+             "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})\n"
+             "del sys.argv[0]\n"
+             "runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)\n")
+
+
 def node_command(module: str, params: dict) -> list[str]:
-    """``python -m module --ros-args -p k:=v ...`` with floats written as floats (ROS types them)."""
-    cmd = [sys.executable, "-m", module, "--ros-args"]
+    """``python -c NODE_BOOT module --ros-args -p k:=v ...`` (as ``python -m module``, see :data:`NODE_BOOT`) with
+    floats written as floats (ROS types them)."""
+    cmd = [sys.executable, "-c", NODE_BOOT, module, "--ros-args"]
     for k, v in params.items():
         cmd += ["-p", f"{k}:={float(v)!r}" if isinstance(v, float) else f"{k}:={v}"]
     return cmd
 
 
+def node_preexec() -> Callable[[], None]:
+    """The ``preexec_fn`` of a node (run in the child between fork and exec): SIGINT/SIGTERM blocked until
+    :data:`NODE_BOOT` unblocks them, and, on Linux, ``prctl(PR_SET_PDEATHSIG, SIGTERM)``: the child gets SIGTERM when
+    this process (the thread calling Popen) ends, also by SIGKILL (elsewhere, or without a usable libc, the nodes'
+    parent watch, :func:`gyro_sim.ros.common.watch_parent`, does it). A child whose parent ended before the prctl
+    exits at once (status 143)."""
+    prctl = None
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            prctl = ctypes.CDLL(None, use_errno=True).prctl
+        except (OSError, AttributeError):
+            prctl = None
+    parent = os.getpid()
+    stop = set(STOP_SIGNALS)
+
+    def preexec() -> None:  # nothing here may need a lock another thread of the parent could hold
+        signal.pthread_sigmask(signal.SIG_BLOCK, stop)
+        if prctl is not None:
+            prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+            if os.getppid() != parent:
+                os._exit(128 + int(signal.SIGTERM))
+
+    return preexec
+
+
+class _Signals:
+    """SIGINT/SIGTERM received by this process, recorded (not raised) while the nodes run; the main thread only
+    (elsewhere Python delivers none: nothing is installed). A signal this process was started ignoring (e.g. SIGINT
+    of a ``cmd &`` in a script) stays ignored."""
+
+    def __init__(self):
+        self.got: list[int] = []
+        self.old: dict = {}
+
+    def __enter__(self) -> "_Signals":
+        if threading.current_thread() is threading.main_thread():
+            for s in STOP_SIGNALS:
+                if signal.getsignal(s) is not signal.SIG_IGN:
+                    self.old[s] = signal.signal(s, lambda signum, frame: self.got.append(signum))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for s, h in self.old.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+
+
+def _say(text: str) -> None:
+    sys.stderr.write(f"gyro-sim: {text}\n")
+    sys.stderr.flush()
+
+
+def _wait(proc: subprocess.Popen, timeout: float) -> Optional[int]:
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None
+
+
+def _kill(name: str, proc: subprocess.Popen, why: str) -> int:
+    """The last resort: SIGKILL, said on stderr."""
+    _say(f"the {name} node {why}: killed (SIGKILL)" + ("; its bag may be unfinished" if name == "simulator" else ""))
+    proc.kill()
+    return proc.wait()
+
+
+def _stop(name: str, proc: subprocess.Popen, sig: int, grace: float) -> int:
+    """End ``proc``: ``sig``, at most ``grace`` s, then SIGKILL."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    code = _wait(proc, grace)
+    if code is None:
+        code = _kill(name, proc, f"did not end within {grace:g} s of {signal_name(sig)}")
+    return code
+
+
+def _as_status(code: int) -> int:
+    """-2 / -15 (a node ended by SIGINT / SIGTERM before it handled it) as 130 / 143; other statuses as they are."""
+    return 128 - code if -code in (int(s) for s in STOP_SIGNALS) else code
+
+
 def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, duration: Optional[float] = None,
            rate_factor: float = 1.0, watchdog_timeout: float = 2.0, with_controller: bool = True,
            domain_id: Optional[int] = None, progress: Optional[bool] = None) -> int:
-    """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends.
+    """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends; then end the
+    controller (SIGINT).
 
-    ``scene`` is a path or a built-in name; returns the simulator's exit status. Ctrl-C is passed
-    to both nodes, which end cleanly (the bag is closed). ``progress`` (default: stderr is a terminal): the
-    simulator shows a progress line.
+    ``scene`` is a path or a built-in name. Returns the simulator's exit status: 0 complete, 130 / 143 stopped by
+    SIGINT / SIGTERM (the bag is closed, marked interrupted), other values a failure (see the module's docstring
+    for the signals: forwarded to both nodes, bounded waits, the nodes die with this process). Call it from a
+    thread that lives as long as the call (PR_SET_PDEATHSIG is tied to the thread that starts the nodes; it returns
+    only once they have ended). ``progress`` (default: stderr is a terminal): the simulator shows a progress line.
     """
     if progress is None:
         progress = sys.stderr.isatty()
     if Path(scene).is_file():
         scene = str(Path(scene).resolve())
     env = ros_env(domain_id)
+    env[PARENT_PID_ENV] = str(os.getpid())
     sim_params = {"scene": scene, "mode": mode, "rate_factor": float(rate_factor),
                   "watchdog_timeout": float(watchdog_timeout), "duration": float(duration or 0.0),
                   "progress": "true" if progress else "false"}
     if record:
         sim_params["record"] = str(Path(record).resolve())
-    procs = []
-    try:
-        sim = subprocess.Popen(node_command("gyro_sim.ros.simulator_node", sim_params), env=env)
-        procs.append(sim)
-        if with_controller:
-            procs.append(subprocess.Popen(node_command("gyro_ctl.ros.controller_node", {"scene": scene}), env=env))
-        return sim.wait()
-    except KeyboardInterrupt:
-        for p in procs:
-            p.send_signal(signal.SIGINT)
-        return procs[0].wait() if procs else 130
-    finally:
-        for p in procs[1:]:
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-                try:
-                    p.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+    preexec = node_preexec()
+    procs: list[tuple[str, subprocess.Popen]] = []
+    with _Signals() as sigs:
+        try:
+            sim = subprocess.Popen(node_command("gyro_sim.ros.simulator_node", sim_params), env=env,
+                                   preexec_fn=preexec)
+            procs.append(("simulator", sim))
+            ctl = None
+            if with_controller:
+                ctl = subprocess.Popen(node_command("gyro_ctl.ros.controller_node", {"scene": scene}), env=env,
+                                       preexec_fn=preexec)
+                procs.append(("controller", ctl))
+            code = _run(sim, ctl, sigs)
+            if ctl is not None:  # SIGINT, or again the signal forwarded (a repeat changes nothing for a node)
+                _stop("controller", ctl, sigs.got[0] if sigs.got else signal.SIGINT, CONTROLLER_GRACE)
+            return _as_status(code)
+        finally:  # (an error of this process: the nodes end with it)
+            for name, p in procs:
+                if p.poll() is None:
+                    _stop(name, p, signal.SIGTERM, STOP_GRACE if name == "simulator" else CONTROLLER_GRACE)
+
+
+def _run(sim: subprocess.Popen, ctl: Optional[subprocess.Popen], sigs: _Signals) -> int:
+    """Wait for the simulator, forwarding the signals this process gets to both nodes; the simulator's status."""
+    forwarded, deadline, ctl_seen = 0, None, ctl is None
+    while True:
+        code = _wait(sim, POLL)
+        if code is not None:
+            return code
+        if len(sigs.got) > forwarded:
+            for s in sigs.got[forwarded:]:
+                for p in (sim, ctl):
+                    if p is not None and p.poll() is None:
+                        p.send_signal(s)
+            if deadline is None:
+                deadline = time.monotonic() + STOP_GRACE
+            else:
+                _say(f"waiting for the simulator node to close its bag (at most {deadline - time.monotonic():.0f} s "
+                     "more, then SIGKILL)")
+            forwarded = len(sigs.got)
+        if deadline is not None and time.monotonic() > deadline:
+            return _kill("simulator", sim, f"did not end within {STOP_GRACE:g} s of {signal_name(sigs.got[0])}")
+        if not ctl_seen and ctl.poll() is not None:
+            ctl_seen = True
+            if not sigs.got and ctl.returncode != 0:
+                _say(f"the controller node ended with status {ctl.returncode} while the simulator runs")

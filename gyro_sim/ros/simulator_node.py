@@ -21,6 +21,12 @@ while recording: a bag holds one run).
 Watchdog: if a controller is expected and no valid command arrives for ``watchdog_timeout`` wall seconds
 (paused time excluded), every stator current is set to zero and a status message says so; it re-arms when
 commands come back. A malformed or out-of-range command is refused whole, with the reason on ``gyro/status``.
+
+Signals and exit status (:func:`gyro_sim.ros.common.node_main`): SIGINT or SIGTERM ends the run at the loop's next
+turn: the ``done:`` line says ``(interrupted)``, the bag is closed, readable, with custom data
+``gyro_sim.end`` = ``interrupted: signal SIGINT`` (or ``SIGTERM``), and the node exits 130 (SIGINT) or 143
+(SIGTERM); a second signal meanwhile changes nothing. 0: the run reached its duration. 2: a refused scene or
+parameter (one ``simulator: error:`` line). A SIGKILL leaves an unfinished bag (no index or metadata).
 """
 from __future__ import annotations
 
@@ -47,8 +53,8 @@ from ..faults import FaultConfig, Faults
 from ..scene import SceneError, load_scene
 from ..recording import STREAM_BUFFER_ROWS, RecordingError
 from ..simulate import Runner, controller_period
-from .common import (BUSY_POLL, make_executor, message_class, node_main, parse_command, qos_profile, take,
-                     wait_for_matches)
+from .common import (BUSY_POLL, exit_status, make_executor, message_class, node_main, parse_command, qos_profile,
+                     signal_name, take, wait_for_matches)
 
 MODES = ("lockstep", "realtime", "freerun")
 #: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
@@ -666,6 +672,8 @@ class Loop:
 
     def finish(self) -> int:
         r, node = self.runner, self.node
+        # decided once (the bag, the done line and the exit status agree); a run that reached its end is complete
+        status = 0 if r.done else exit_status(self.stop)
         wall = self.run_wall()
         compiled = compile_seconds() - self.c0
         lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
@@ -674,8 +682,9 @@ class Loop:
                          ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
                          ("latency_p99_s", float(np.percentile(lat, 99))), ("latency_max_s", float(np.max(lat)))):
                 self.recorder.set_custom(f"gyro_sim.{k}", v)
-            if self.stop.is_set():
-                self.recorder.interrupted("signal")
+            if status:
+                signum = getattr(self.stop, "signum", None)
+                self.recorder.interrupted(f"signal {signal_name(signum)}" if signum else "stopped")
         self.diagnostics(force=True)
         if self.p["progress"]:
             self.show_progress(end=True)
@@ -684,8 +693,8 @@ class Loop:
                     f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
                     f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms max {np.max(lat) * 1e3:.3f} ms"
                     + (f" (+ {compiled:.1f} s compiling the kernels, first use)" if compiled else "")
-                    + (" (interrupted)" if self.stop.is_set() else ""))
-        return 0
+                    + (" (interrupted)" if status else ""))
+        return status  # 0 complete; 130 / 143 stopped by SIGINT / SIGTERM (the bag is closed)
 
 
 def _scene_text(scene) -> str:
@@ -696,7 +705,8 @@ def _scene_text(scene) -> str:
 
 def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     """The simulation loop, with the node's callbacks run in the same thread (:meth:`Loop.pump`): a command
-    reaches the loop without a thread hand-over (lockstep ticks/s)."""
+    reaches the loop without a thread hand-over (lockstep ticks/s). Returns the exit status: 0 the run reached its
+    end, 128 + n it was stopped by signal n (``stop``, see :func:`gyro_sim.ros.common.exit_status`)."""
     executor = make_executor()
     executor.add_node(node)
     try:
