@@ -54,9 +54,15 @@ def _run_epilog() -> str:
     return f"""\
 exit status:
   0    the run reached its end (summary and plot written)
-  2    bad usage, a scene error, or (--ros) a node that failed: one 'error:' line
-  130  --ros, stopped by SIGINT (Ctrl-C)  }} the summary and plot of what was recorded;
-  143  --ros, stopped by SIGTERM          }} the bag is complete, marked interrupted
+  1    the bag could not be written whole (e.g. the disk filled): it is closed with what fit
+  2    bad usage, a scene error, an unusable --record/--out (checked before the run), or (--ros)
+       a node that failed: one 'error:' line
+  130  stopped by SIGINT (Ctrl-C)   }} with --record or --ros: the summary and plot of what was
+  143  stopped by SIGTERM           }} recorded; the bag is complete, marked interrupted
+  129  stopped by SIGHUP (in-process; --ros nodes take it as their own)
+
+a recorded run writes its bag as it goes: a kill -9 or a crash loses at most the last
+second; 'gyro-sim bag recover BAG' rebuilds such a bag.
 
 with --ros: SIGINT/SIGTERM to gyro-sim (alone or with its process group) is passed to
 both nodes, which close the bag; a node still running {STOP_GRACE:g} s later (the controller:

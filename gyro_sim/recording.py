@@ -452,10 +452,10 @@ class BagRecorder:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if isinstance(exc, RunInterrupted):
-            self._end = f"interrupted: {signal.Signals(exc.signum).name}"
+        if isinstance(exc, RunInterrupted):  # (the words the simulator node uses too)
+            self._end = f"interrupted: signal {signal.Signals(exc.signum).name}"
         elif isinstance(exc, KeyboardInterrupt):
-            self._end = "interrupted: SIGINT (Ctrl-C)"
+            self._end = "interrupted: signal SIGINT"
         elif exc_type is not None:
             self._end = f"interrupted: {exc_type.__name__}" + (f" ({exc})" if str(exc) else "")
         self.close()

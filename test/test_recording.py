@@ -366,7 +366,7 @@ def test_keyboard_interrupt_leaves_a_complete_bag(tmp_path, recorded):
     assert np.isnan(d.command_rate).all()
     assert d.scene_text == recorded["scene_text"]
     info = bag_info(path)
-    assert info["end_reason"] == "interrupted: SIGINT (Ctrl-C)"
+    assert info["end_reason"] == "interrupted: signal SIGINT"
     assert info["custom"]["mode"] == "lockstep"
     # writing after close is refused
     with pytest.raises(RuntimeError, match="closed"):
@@ -443,8 +443,8 @@ def test_signal_mid_run_leaves_a_complete_bag(tmp_path, sig):
     assert np.array_equal(d.t_ns, np.arange(len(d)) * 1_000_000)
     with open(mcap_file(path), "rb") as f:
         assert make_reader(f).get_summary().statistics.message_count == 7 * len(d) + 1
-    assert bag_info(path)["end_reason"] == ("interrupted: SIGINT (Ctrl-C)" if sig == signal.SIGINT
-                                            else "interrupted: SIGTERM")
+    assert bag_info(path)["end_reason"] == ("interrupted: signal SIGINT" if sig == signal.SIGINT
+                                            else "interrupted: signal SIGTERM")
 
 
 # --- message content and adapters ------------------------------------------------------------
