@@ -59,7 +59,7 @@ exit status:
        a node that failed: one 'error:' line
   130  stopped by SIGINT (Ctrl-C)   }} with --record or --ros: the summary and plot of what was
   143  stopped by SIGTERM           }} recorded; the bag is complete, marked interrupted
-  129  stopped by SIGHUP (in-process; --ros nodes take it as their own)
+  129  stopped by SIGHUP (in-process)
 
 a recorded run writes its bag as it goes: a kill -9 or a crash loses at most the last
 second; 'gyro-sim bag recover BAG' rebuilds such a bag.
