@@ -240,7 +240,7 @@ def _unshare_ok() -> str:
     return "" if probe.returncode == 0 else f"cannot mount a tmpfs here: {probe.stderr.strip()[:200]}"
 
 
-def _in_tmpfs(tmp_path: Path, size: str, command: str, ro: bool = False) -> subprocess.CompletedProcess:
+def _in_tmpfs(tmp_path: Path, size: str, command: str, ro: bool = False, env=None) -> subprocess.CompletedProcess:
     """Run a shell command with a fresh tmpfs of ``size`` mounted at tmp_path/disk (read-only: ``ro``), in a
     private mount namespace: the mount goes away with the process. The tmpfs content is copied to tmp_path/after."""
     disk, after = tmp_path / "disk", tmp_path / "after"
@@ -249,7 +249,7 @@ def _in_tmpfs(tmp_path: Path, size: str, command: str, ro: bool = False) -> subp
     script = (f"mount -t tmpfs -o {opts} tmpfs {disk} && {{ {command}; }}; rc=$?; "
               f"cp -a {disk} {after}; exit $rc")
     return subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, cwd=tmp_path,
-                          timeout=600)
+                          timeout=600, env=env)
 
 
 def _cmd(*args: str) -> str:
@@ -273,6 +273,29 @@ def test_full_disk_mid_run_closes_the_bag_with_what_fit(tmp_path):
     assert info["end_reason"].startswith("interrupted: No space left on device")
     assert not (bag / ".gyro_sim_reserve").exists()
     print(f"\nENOSPC on a 20 MiB tmpfs: {lines[0]}\n  bag: {info['message_count']} messages up to t = {data.t[-1]:.6g} s")
+
+
+def test_full_disk_in_the_simulator_node(tmp_path):
+    """The simulator node recording to a disk that fills: its bag is closed with what fit, the error is on
+    gyro/status and in its log, and it exits 1 (before: a traceback and an unreadable bag)."""
+    pytest.importorskip("rclpy")
+    why = _unshare_ok()
+    if why:
+        pytest.skip(why)
+    import shlex
+
+    from gyro_sim.ros.launch import node_command
+    from gyro_sim.testing import ros_env, unique_domain
+
+    cmd = node_command("gyro_sim.ros.simulator_node", {
+        "scene": "spinup_thin_shell", "mode": "freerun", "duration": 100000.0, "expect_controller": "false",
+        "progress": "false", "record": str(tmp_path / "disk" / "bag")})
+    p = _in_tmpfs(tmp_path, "20m", shlex.join(cmd), env=ros_env(unique_domain()))
+    assert p.returncode == 1, p.stderr[-3000:]
+    assert "No space left on device" in p.stderr and "Traceback" not in p.stderr, p.stderr[-3000:]
+    info, data = _check_bag(tmp_path / "after" / "bag")
+    assert info["end_reason"].startswith("interrupted: No space left on device")
+    print(f"\nnode, ENOSPC on a 20 MiB tmpfs: rc 1, bag up to t = {data.t[-1]:.6g} s, {info['message_count']} messages")
 
 
 def test_too_little_space_or_read_only_is_refused_before_the_run(tmp_path):
