@@ -459,6 +459,10 @@ def _run_ros(args, scene, name) -> int:
     return code
 
 
+#: samples of a bag read for its summary and plot (every k-th and the last)
+PLOT_SAMPLES = 20_000
+
+
 def _bag_result(bag: Path):
     """A RunResult-like view of a recorded bag (for the summary and the plot)."""
     from types import SimpleNamespace
@@ -467,7 +471,7 @@ def _bag_result(bag: Path):
 
     from gyro_sim.recording import bag_info, read_bag
 
-    b = read_bag(bag)
+    b = read_bag(bag, max_samples=PLOT_SAMPLES)  # (thinned: memory bounded however long the run)
     info = bag_info(bag)
     J = None
     try:

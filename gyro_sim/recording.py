@@ -934,8 +934,17 @@ def _ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
-def read_bag(path: Union[str, os.PathLike]) -> BagData:
-    """Read a gyro_sim bag (a bag directory or its .mcap file) with rosbags into :class:`BagData`."""
+#: topics read_bag(max_samples=...) thins out (every k-th message and the last); status and the scene are kept
+_THINNED = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_EFFECTS,
+            TOPIC_STATOR_COMMANDS, TOPIC_CLOCK)
+
+
+def read_bag(path: Union[str, os.PathLike], max_samples: Optional[int] = None) -> BagData:
+    """Read a gyro_sim bag (a bag directory or its .mcap file) with rosbags into :class:`BagData`.
+
+    ``max_samples``: read at most about that many samples of each state topic (and of the commands and /clock):
+    every k-th message and the last one, k from the bag's message counts (memory bounded however long the run: a
+    summary or a plot of an hour-long bag); None reads every message."""
     from rosbags.rosbag2 import Reader
 
     path = Path(path)
@@ -954,7 +963,25 @@ def read_bag(path: Union[str, os.PathLike]) -> BagData:
         custom = _custom_data(reader, path)
         conns = [c for c in reader.connections if c.topic in TOPICS and c.msgtype == TOPICS[c.topic]
                  and c.topic not in (TOPIC_TF, TOPIC_TF_STATIC, TOPIC_DIAGNOSTICS)]  # (not in BagData)
-        for conn, log_ns, raw in reader.messages(connections=conns):
+        stride = 1
+        if max_samples is not None:
+            most = max([c.msgcount for c in conns if c.topic in _THINNED] + [1])
+            stride = max(1, -(-most // max(1, int(max_samples))))
+        seen: dict[str, int] = {}
+        last: dict[str, tuple] = {}  # a thinned topic's last message, when it was not kept
+
+        def messages():
+            for conn, log_ns, raw in reader.messages(connections=conns):
+                if stride > 1 and conn.topic in _THINNED:
+                    i = seen[conn.topic] = seen.get(conn.topic, -1) + 1
+                    if i % stride:
+                        last[conn.topic] = (conn, log_ns, raw)
+                        continue
+                    last.pop(conn.topic, None)
+                yield conn, log_ns, raw
+            yield from last.values()
+
+        for conn, log_ns, raw in messages():
             topic = conn.topic
             m = des(raw, conn.msgtype)
             if topic == TOPIC_IMU:
