@@ -18,7 +18,9 @@ from typing import Optional, Sequence
 import numpy as np
 
 from . import effects, frozen_flow, kernels
+from .accuracy import mode_plan, truncated_model, warn as accuracy_warning
 from .compile_watch import CompileClock
+from .conductor import DEFAULT_N_MODES
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
@@ -206,12 +208,18 @@ class Simulator:
     eddy modes are in the case frame (``self.attitude`` False).
     """
 
-    def __init__(self, scene: Scene, attitude: Optional[bool] = None):
+    def __init__(self, scene: Scene, attitude: Optional[bool] = None, horizon: Optional[float] = None):
         self.scene = scene
         self.attitude = integrates_attitude(scene, attitude)
         J = scene.inertia
         self.J = J
         self.Jinv = 1.0 / J
+        # the run's accuracy plan (gyro_sim/accuracy.py): made for ``horizon`` s (default: the scene's duration),
+        # the same in-process and in the ROS node
+        self.horizon = float(scene.duration if horizon is None else horizon)
+        self.mode_plan = mode_plan(scene, self.horizon, self.attitude)
+        self.slip_met = 0.0  # largest slip bound met at a step plan (rad/s): the modes' error is judged there
+        self._slip_warned = False
         # --- eddy-current model (physics.md §3)
         cond = scene.rotor.conductor
         self.conductor = None
@@ -219,10 +227,18 @@ class Simulator:
         w = np.zeros(0)
         tail = 0.0
         c_m = 0.0
-        if cond is not None and scene.torque_model != "none":
-            self.conductor = conductor_model(
-                cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness, n_modes=scene.modes
-            )
+        if cond is not None and scene.torque_model == "lag" and scene.effects.magnetizable is not None:
+            # the magnetizable body replaces the modes; the conductor gives its default P1, P2 (effects.py)
+            self.conductor = conductor_model(cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness,
+                                             n_modes=scene.modes or DEFAULT_N_MODES)
+        elif cond is not None and scene.torque_model == "lag":
+            mp = self.mode_plan
+            self.conductor = truncated_model(cond.kind, cond.outer_radius, cond.conductivity, cond.thickness, mp.n,
+                                             mp.tail)
+        elif cond is not None and scene.torque_model != "none":
+            self.conductor = conductor_model(cond.kind, cond.outer_radius, cond.conductivity,
+                                             thickness=cond.thickness)  # quasi-static: τ_eff alone (exact)
+        if self.conductor is not None:
             c_m = float(self.conductor.moment_scale)
             if scene.torque_model == "quasi_static":
                 tail = float(self.conductor.tau_eff)  # [K] (1.2)
@@ -487,11 +503,31 @@ class Simulator:
         if seg is not None and seg[0] == key and self.t == self._seg_t_end and self.eff[effects.ON] == 0.0:
             return seg[1]
         Bre, Bim, om = self.phasors()
+        self._check_slip(om)
         # no field (or no torque model) and no effect: the geometric free stepper
         free = (om.size == 0 or (self.c_m == 0.0 and self.eff[effects.MAG] == 0.0)) and self.eff[effects.ON] == 0.0
         method, h_max = self._step_plan(free)
         self._seg = (key, (self.t, Bre, Bim, om, free, method, h_max))
         return self._seg[1]
+
+    def _check_slip(self, om: np.ndarray) -> None:
+        """Note the slip bound of a new command segment (fastest field rate + |Ω| now, rad/s) in ``slip_met``; warn
+        once where it passes the slip the eddy modes were chosen for (a command or law beyond the scene's rates:
+        gyro_sim.accuracy.mode_plan) and the modes then miss the tolerance."""
+        slip = float(np.max(np.abs(om), initial=0.0)) + float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv))
+        self.slip_met = max(self.slip_met, slip)
+        mp = self.mode_plan
+        if self._slip_warned or mp.kind in (None, "thin_shell") or mp.n == 0 or slip <= mp.slip * (1 + 1e-9):
+            return
+        e_g, e_im = mp.error_at(slip)
+        if e_g > mp.tol_g or e_im > mp.tol_im:
+            self._slip_warned = True
+            accuracy_warning(
+                f"scene {self.scene.name!r}: at t = {self.t:.6g} s the slip reaches {slip:.4g} rad/s, beyond the "
+                f"{mp.slip:.4g} rad/s the {mp.n} eddy modes were chosen for (a command or law faster than the "
+                f"scene's rates): their truncation error there is {e_g:.2g} of ĝ, {e_im:.2g} of Im ĝ against "
+                f"tolerances {mp.tol_g:.2g}, {mp.tol_im:.2g}; give the rate in the scene (a stator, command or law "
+                f"parameter) or set modes")
 
     def torque(self) -> np.ndarray:
         """Electrodynamic torque now (case frame, N·m)."""
@@ -573,14 +609,16 @@ class Runner:
 
     def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
                  attitude: Optional[bool] = None, control_period: Optional[float] = None,
-                 buffer_rows: Optional[int] = None):
+                 buffer_rows: Optional[int] = None, horizon: Optional[float] = None):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
         if control_period is not None and not (math.isfinite(control_period) and control_period > 0):
             raise SceneError(f"control_period = {control_period}: must be a finite number of seconds > 0")
         self.scene, self.T = scene, T
-        self.sim = Simulator(scene, attitude)
+        # the accuracy plan is made for the run's duration (``horizon``: another, e.g. a re-run of an interrupted
+        # bag planned for its whole duration)
+        self.sim = Simulator(scene, attitude, horizon=T if horizon is None else horizon)
         t_out = scene.output.sample_times(T)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
