@@ -433,6 +433,9 @@ class BenchConfig:
     averaged_scenes: tuple = AVERAGED_SCENES  # fidelity auto against full on the scenes of each averaged model
     profile: bool = True
     ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
+    accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
+    accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
+    only: Optional[str] = None  # run this part alone ("accuracy")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -478,6 +481,7 @@ class Results:
     savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
+    accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""
@@ -900,6 +904,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     """Run every part of ``cfg``, write DIR/bench.md, bench.csv, work_precision.png; return the results."""
     res = Results(cfg, started=_dt.datetime.now().astimezone().isoformat(timespec="seconds"), command=command)
     w0 = time.perf_counter()
+    if cfg.only == "accuracy":
+        from .bench_accuracy import accuracy_part
+
+        accuracy_part(res, cfg.mode == "quick", list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     for scene in cfg.scenes:
         work_precision(res, scene, cfg.horizon_of(scene))
     for scene in cfg.long_horizon_scenes:
@@ -922,6 +933,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         from .bench_ros import ros_part
 
         ros_part(res, quick=cfg.mode == "quick")
+    if cfg.accuracy:
+        from .bench_accuracy import accuracy_part
+
+        accuracy_part(res, cfg.mode == "quick", list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
     res.wall_total = time.perf_counter() - w0
     write_outputs(res, Path(out))
     return res
@@ -1019,8 +1034,17 @@ def write_outputs(res: Results, out: Path) -> None:
             wr.writerow([r.scene, f"{r.horizon:g}", r.method, r.knob, f"{r.value:g}", f"{r.cpu:.6g}", f"{r.wall:.6g}",
                          r.steps, "" if r.rhs is None else r.rhs, f"{r.error:.6g}", f"{r.error_L:.6g}",
                          f"{r.rtf:.6g}", r.note])
+    if res.accuracy is not None:
+        from .bench_accuracy import csv_rows
+
+        rows = csv_rows(res.accuracy)
+        with open(out / "accuracy.csv", "w", newline="") as fh:
+            wr = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["scene"])
+            wr.writeheader()
+            wr.writerows(rows)
     (out / "bench.md").write_text(markdown(res))
-    plot_work_precision(res, out / "work_precision.png")
+    if res.rows:
+        plot_work_precision(res, out / "work_precision.png")
 
 
 def machine() -> str:
@@ -1150,6 +1174,10 @@ def markdown(res: Results) -> str:
     from .bench_ros import markdown as ros_markdown
 
     L += ros_markdown(res)
+    if res.accuracy is not None:
+        from .bench_accuracy import markdown_lines
+
+        L += markdown_lines(res.accuracy)
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"
@@ -1208,6 +1236,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenes", metavar="SCENE", nargs="+", default=list(DEFAULT_SCENES),
                    help=f"scenes of the work-precision comparison (default: {' '.join(DEFAULT_SCENES)})")
     p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
+    p.add_argument("--no-accuracy", action="store_true",
+                   help="skip the accuracy part (every built-in scene against the accuracy it states)")
+    p.add_argument("--only", choices=["accuracy"], help="run this part alone")
+    p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
+                   help="scenes of the accuracy part (default: every built-in scene)")
     return p
 
 
@@ -1224,12 +1257,27 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     cfg = (quick_config if args.quick else full_config)(args.scenes)
     cfg.ros = cfg.ros and not args.no_ros
+    cfg.accuracy = not args.no_accuracy
+    cfg.only = args.only
+    if args.accuracy_scenes:
+        try:
+            for s in args.accuracy_scenes:
+                load_scene(s)
+        except SceneError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        cfg.accuracy_scenes = tuple(args.accuracy_scenes)
     command = "gyro-sim bench " + " ".join(sys.argv[1:] if argv is None else list(argv))
     res = run_bench(cfg, args.out, command=command.strip())
     print()
     print("Headline (ratios measured in this run):")
     for line in headline_lines(res):
         print("  " + line)
+    if res.accuracy is not None:
+        from .bench_accuracy import headline as acc_headline
+
+        for line in acc_headline(res.accuracy):
+            print("  " + line)
     print(f"wrote {args.out / 'bench.md'}, {args.out / 'bench.csv'}, {args.out / 'work_precision.png'} "
           f"({res.wall_total:.1f} s)")
     return 0

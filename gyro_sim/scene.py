@@ -26,7 +26,8 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     accuracy:                        # what the run must hold over its whole duration (gyro_sim/accuracy.py)
       rtol: 1.0e-6                   # relative tolerance on L (default 1e-6)
       attitude: 1.0e-6               # absolute tolerance on the attitude, rad (default 1e-6; the rotation
-                                     # angle between the computed and the true attitude, spin phase included)
+                                     # angle between the computed and the true attitude, spin phase included;
+                                     # null: none, only rtol)
     modes: null                      # eddy modes kept by the lag model of a solid sphere / shell; default:
                                      # chosen from accuracy and the largest slip the run can meet (with or
                                      # without the static tail term); a number given here wins (a warning
@@ -308,7 +309,7 @@ class Accuracy(_Strict):
     for them and reports its estimated error (gyro_sim/accuracy.py, ``RunResult.error_estimate``)."""
 
     rtol: real(ge=1e-13, le=0.1) = 1e-6
-    attitude: real(ge=1e-13, le=1.0) = 1e-6
+    attitude: Optional[real(ge=1e-13, le=10.0)] = 1e-6  # null: no tolerance on the attitude (only rtol)
 
 
 class Scene(_Strict):
