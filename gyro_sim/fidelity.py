@@ -232,7 +232,7 @@ def _handover_to_full(runner: Runner, k: int, L: float, theta: float) -> None:
         sim.y[7 + 3 * n: 10 + 3 * n] = gn.real * Bb - gn.imag * b_im
 
 
-def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
+def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optional[bool] = None) -> RunResult:
     """``fidelity: auto`` (and ``averaged``): full model where needed, the averaged model elsewhere.
 
     The regions are tested where the commands change and otherwise every ``RECHECK`` of the slow time
@@ -244,7 +244,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     """
     from gyro_ctl.laws import make_law, make_switching
 
-    r = Runner(scene, duration, sample_breaks=False)
+    r = Runner(scene, duration, sample_breaks=False, estimate=estimate)
     sim = r.sim
     ctl = scene.controller
     law = make_law(ctl) if ctl is not None else None

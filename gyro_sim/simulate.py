@@ -683,7 +683,7 @@ class Simulator:
         Lb, _ = body_rates(self.J, Y[:, 0:3], Y[:, 3:7])
         k0 = 7 + 3 * self.tau.size
         return np.array([effects.body_rate(float(ti), *Lb[i], Y[i], k0, self.Jinv, self.eff)
-                         for i, ti in enumerate(np.broadcast_to(t, (Y.shape[0],)))])
+                         for i, ti in enumerate(np.broadcast_to(t, (Y.shape[0],)))]).reshape(-1, 3)
 
 
 def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1090,23 +1090,27 @@ class Runner:
                          attitude=self.sim.attitude, error_estimate=self.error_estimate())
 
 
-def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None) -> RunResult:
+def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None,
+        estimate: Optional[bool] = None) -> RunResult:
     """Run a scene in-process (no ROS) and return its time series at the scene's output rate.
 
     A scene with a ``controller`` runs its law (gyro_ctl) at every tick, and with ``sampling: events``
     also at the exact zeros of the law's switching functions between ticks. ``on_samples(dict)``, if
     given, is called with each new chunk of output rows (see :meth:`Runner.samples`). ``attitude``: None
     = the scene's ``output.attitude``, True = integrate it anyway (:func:`integrates_attitude`).
+    ``estimate``: False runs without the error control's shadow run (:class:`Runner`; the estimate is then the
+    step plan's model), e.g. to time the integrator alone at given knobs; None: with it where it can follow.
     """
     if scene.fidelity != "full":
         from .fidelity import run_hybrid
 
-        return run_hybrid(scene, duration)
+        return run_hybrid(scene, duration, estimate=estimate)
     ctl = scene.controller
     switching = ctl is not None and ctl.sampling == "events"
     # samples are breaks where a caller acts on them, and where switching events are looked for between
     # breaks (the node does the same: the same events, the same bits)
-    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching, attitude=attitude)
+    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching, attitude=attitude,
+               estimate=estimate)
     drive(r, on_samples)
     return r.result()
 

@@ -572,6 +572,8 @@ class Loop:
         self.last_cmd_wall = time.perf_counter()  # the watchdog counts from the resume
 
     def publish_samples(self, rows: slice) -> None:
+        if rows.stop <= rows.start:  # a break that is no sample (a command's instant, an error-control check)
+            return
         s = self.runner.samples(rows)
         self.node.publish_samples(s, self.names)
         if s["t"].size:
