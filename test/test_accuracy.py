@@ -129,3 +129,77 @@ def test_law_rates_count_in_the_plan():
 def test_accuracy_section_is_validated(acc, msg):
     with pytest.raises(SceneError, match=msg):
         scene_from_dict({"rotor": {"inertia": [1, 1, 1]}, "duration": 1.0, "accuracy": acc})
+
+
+# --- part 2 and 3: steps chosen for the tolerance, the error control, the estimate ---------------------------
+def test_error_control_decides_alike_whatever_the_breaks():
+    """The error control checks at fixed instants that are breaks of every run: an in-process run and one whose
+    samples are breaks (as the ROS node runs) change their step alike and give the same bits and estimate."""
+    from gyro_sim.simulate import Runner, drive
+
+    s = load_scene("spinup_thin_shell", overrides={"duration": 4.0})
+    runs = []
+    for breaks in (False, True):
+        r = Runner(s, sample_breaks=breaks, attitude=True)
+        drive(r)
+        runs.append(r)
+    a, b = (x.result() for x in runs)
+    divs = [h[3] for h in runs[0].control.history]
+    print(f"\nstep divisor at the checks: {', '.join(f'{d:.3g}' for d in divs)}; final {runs[0].sim.step_div:.3g}")
+    assert len(set(divs)) > 1  # the control did change the step
+    assert np.array_equal(a.L, b.L) and np.array_equal(a.q, b.q) and a.steps == b.steps
+    assert a.error_estimate == b.error_estimate
+
+
+def test_estimate_is_reported_everywhere(tmp_path):
+    from gyro_sim.cli import format_summary
+    from gyro_sim.recording import bag_info, record_run
+
+    s = load_scene("nutation_oblate", overrides={"duration": 0.2})
+    r = record_run(s, tmp_path / "bag")
+    est = r.error_estimate
+    assert est is not None and est.steps_method == "richardson" and est.met
+    summ = r.summary()
+    assert summ["error_L"] == est.L and summ["error_attitude"] == est.attitude and summ["accuracy_met"] is True
+    assert "estimated error" in format_summary("x", summ)
+    custom = bag_info(tmp_path / "bag")["custom"]
+    from gyro_sim.accuracy import ErrorEstimate
+
+    assert ErrorEstimate.from_json(str(custom["gyro_sim.error_estimate"])) == est
+    print(f"\nestimate: {est.text()}")
+
+
+def test_steps_follow_the_tolerance_and_explicit_knobs_win_with_a_warning():
+    s6 = load_scene("rotating_field", overrides={"duration": 2.0})
+    s3 = load_scene("rotating_field", overrides={"duration": 2.0, "accuracy": {"rtol": 1e-3, "attitude": 1e-3}})
+    p6, p3 = Simulator(s6).step_plan, Simulator(s3).step_plan
+    assert p6.steps_per_turn["lawson8"] > p3.steps_per_turn["lawson8"] and p6.rate_change < p3.rate_change
+    s = load_scene("rotating_field", overrides={"duration": 2.0, "integrator": {"method": "lawson8",
+                                                                              "steps_per_turn": 8}})
+    with pytest.warns(AccuracyWarning, match="steps_per_turn = 8 cannot meet accuracy"):
+        r = run(s)
+    assert r.error_estimate is not None
+
+
+@pytest.mark.parametrize("name,T", [("rotating_field", 2.0), ("pulsating_field", 2.0), ("constant_field", 4.0),
+                                    ("spinup_thin_shell", 4.0)])
+def test_estimate_within_a_factor_ten_of_the_error(name, T):
+    """The run's estimate against its error from a converged reference (lawson8 with steps well under τ and the
+    turn), on scenes whose error is far above the reference's own."""
+    ov = {"duration": T}
+    r = run(load_scene(name, overrides=ov), attitude=True)
+    ref = run(load_scene(name, overrides={**ov, "integrator": {"method": "lawson8", "steps_per_turn": 512}}),
+              attitude=True, estimate=False)
+    n = len(ref.t)
+    d = np.minimum(np.linalg.norm(r.q - ref.q, axis=1), np.linalg.norm(r.q + ref.q, axis=1))
+    eq = float(np.max(4 * np.arcsin(d / 2)))
+    eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1)) / np.max(np.linalg.norm(ref.L, axis=1)))
+    est = r.error_estimate
+    print(f"\n{name} {T:g} s: error L {eL:.2e} attitude {eq:.2e}; estimate {est.L:.2e}, {est.attitude:.2e} "
+          f"(ratios {est.L / eL:.2g}, {est.attitude / eq:.2g}; within a factor 10 asked); {n} samples")
+    assert eq <= s_tol(r) and eL <= r.scene.accuracy.rtol
+    assert 0.1 <= est.attitude / eq <= 10
+
+
+def s_tol(r):
+    return r.scene.accuracy.attitude
