@@ -534,6 +534,10 @@ AIM = 0.5
 #: a run refines its step by at most this factor at a check, coarsens it by at most COARSEN, and keeps its step
 #: within [1/MAX_COARSE, MAX_REFINE] of the plan's
 REFINE_MAX = 4.0
+#: at the early checks (before T/16) the step is made shorter only where the projected new error is this many times
+#: the budget, by at most REFINE_MAX_EARLY: they project a short stretch over the whole run
+EARLY_RHO = 4.0
+REFINE_MAX_EARLY = 2.0
 COARSEN = 2.0
 MAX_COARSE = 8.0
 MAX_REFINE = 1e4
@@ -622,7 +626,8 @@ class ErrorControl:
         self.L_max = 0.0
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
-        self.prev = None  # (t, |ΔL| now, attitude error now) at the previous check
+        self.prev = None  # (t, |ΔL| now, attitude error now, error of |L| now) at the previous check
+        self.dLn = 0.0
         self.banked = (0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
         self.history: list = []  # (t, e_L, e_q, step_div) at each check
 
@@ -656,10 +661,13 @@ class ErrorControl:
         self.L_max = max(self.L_max, L_norm)
 
     def _now(self, main, shadow) -> tuple[float, float]:
-        """(|ΔL| N m s, attitude error rad) of the run now from its difference with the shadow."""
+        """(|ΔL| N m s, attitude error rad) of the run now from its difference with the shadow; ``self.dLn``: the
+        error of |L| (what turns the spin rate: the attitude drifts at it over J)."""
         den = self.denom
         if not math.isfinite(den):
+            self.dLn = 0.0
             return 0.0, 0.0
+        self.dLn = abs(float(np.linalg.norm(main.y[0:3])) - float(np.linalg.norm(shadow.y[0:3]))) / den
         dL = float(np.linalg.norm(main.y[0:3] - shadow.y[0:3])) / den
         dq = 0.0
         if self.attitude:
@@ -680,14 +688,18 @@ class ErrorControl:
         """Keep the errors so far (the shadow is about to be set to the run's state: a fidelity hand-over)."""
         self.banked = (self.dL, self.e_q)
         self.prev = None
+        self.dLn = 0.0
 
     def coarsest(self, main, method: str) -> float:
         """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
         if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
             return self.plan.rate_change / RATE_CHANGE_MAX
+        div = 1.0
         if method in SPT_MIN:
-            return SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]
-        return 1.0
+            div = SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]
+        if method == "lawson8" and main.tau.size:  # the shadow's lawson8 step too within 2 τ_min (its order holds)
+            div = max(div, SHADOW_RATIO[method] * main._h_for("lawson8") / (2.0 * float(np.min(main.tau))))
+        return div
 
     def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,
               measurable: bool = True) -> Optional[float]:
@@ -697,9 +709,10 @@ class ErrorControl:
         shadow's steps were longer than the run's since the previous check (else the error made was not seen, and
         the step is not made longer)."""
         dL, dq, e_L, e_q = self.measure(main, shadow)
+        dLn = self.dLn
         self.history.append((t, e_L, e_q, main.step_div))
-        t0, dL0, dq0 = self.prev if self.prev is not None else (0.0, 0.0, 0.0)
-        self.prev = (t, dL, dq)
+        t0, dL0, dq0, dLn0 = self.prev if self.prev is not None else (0.0, 0.0, 0.0, 0.0)
+        self.prev = (t, dL, dq, dLn)
         if not self.adapt or method not in ORDER or t <= t0:
             return None
         if not measurable:  # back to a step the shadow can measure against (never coarser here)
@@ -712,17 +725,21 @@ class ErrorControl:
         new = [rate_L * left / L_ref / plan.tol_L]
         room = [max(AIM - self.dL / L_ref / plan.tol_L, 0.1 * AIM)]
         if self.attitude and math.isfinite(plan.tol_q):
-            drift, drift0 = dL / self.J_min, dL0 / self.J_min
+            # the error of |L| turns the spin rate: the attitude drifts at it over J from now on
+            drift, drift0 = dLn / self.J_min, dLn0 / self.J_min
+            rate_Ln = scale * max(dLn - dLn0, 0.0) / (t - t0)
             committed = e_q + drift * left
             # growth of the attitude error beyond the drift of the L error there was (the steps' own phase error)
             rate_q = scale * max((dq - dq0) / (t - t0) - 0.5 * (drift + drift0), 0.0)
-            new.append((rate_q * left + rate_L / self.J_min * 0.5 * left * left) / plan.tol_q)
+            new.append((rate_q * left + rate_Ln / self.J_min * 0.5 * left * left) / plan.tol_q)
             room.append(max(AIM - committed / plan.tol_q, 0.1 * AIM))
         rho = max(n / r for n, r in zip(new, room))
+        settled = all(r > 0.1 * AIM for r in room)  # (no longer steps once the budget is spent)
         p = ORDER[method]
-        if rho > 1.0:
-            f = min(REFINE_MAX, (rho / 0.6) ** (1.0 / p))
-        elif rho < 0.3 and t >= self.T / 16 * (1 - 1e-12):  # (coarser only on the regular checks' evidence)
+        early = t < self.T / 16 * (1 - 1e-12)
+        if rho > (EARLY_RHO if early else 1.0):  # (early checks project a short stretch far: they act on more)
+            f = min(REFINE_MAX_EARLY if early else REFINE_MAX, (rho / 0.6) ** (1.0 / p))
+        elif rho < 0.3 and settled and not early:  # (coarser only on the regular checks' evidence)
             f = max(1.0 / COARSEN, (max(rho, 1e-300) / 0.6) ** (1.0 / p))
         else:
             return None
