@@ -219,8 +219,11 @@ def test_malformed_commands_are_refused_with_reasons(ros, tmp_path):
     out = tmp_path / "status.json"
     probe = ros.start(PROBE, "listen", str(out), str(PROBE_WINDOW), "0", "/gyro/status")
     wait_ready(out)
-    sim = ros.simulator(scene="nutation_oblate", mode="realtime", duration=4.0, watchdog_timeout=0.0)
     bad = ros.start(PROBE, "bad_commands", str(PROBE_WINDOW), "0")
+    # the run starts once both probes subscribe to gyro/status (on a loaded machine the flooder could come up after
+    # a 4 s run had ended, then wait for a 'done:' that was gone: the test timed out)
+    sim = ros.simulator(scene="nutation_oblate", mode="realtime", duration=4.0, watchdog_timeout=0.0,
+                        wait_for_subscribers=2, startup_timeout=120.0)
     code, text = finish(sim)
     assert code == 0, text
     finish(bad)
