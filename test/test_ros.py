@@ -160,6 +160,26 @@ def test_replay_republishes_a_bag(ros, tmp_path):
     assert seen["stamps"] == sorted(seen["stamps"])
 
 
+def test_replay_stopped_by_a_signal_says_so_in_its_status(ros, tmp_path):
+    """A replay ended by SIGTERM exited 0 like a whole one (scripts could not tell them apart): now 143, and its
+    last line says it was interrupted."""
+    bag = tmp_path / "src"
+    from gyro_sim.recording import record_result
+
+    record_result(gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.5), bag)
+    out = tmp_path / "seen.json"
+    probe = ros.start(PROBE, "listen", str(out), str(PROBE_WINDOW), "1", "/clock")  # ends at its first message
+    wait_ready(out)
+    # 500 s of wall time at this rate; the first message goes out once the probe is matched
+    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "0.001", "--wait-for-subscribers", "1",
+                    "--startup-timeout", "120")
+    finish(probe)  # the replay is publishing: its signal handlers are in place
+    assert rep.poll() is None
+    rep.send_signal(signal.SIGTERM)
+    code, text = finish(rep, 120)
+    assert code == 143 and "interrupted by SIGTERM" in text, text
+
+
 def test_killing_the_controller_triggers_the_watchdog(ros, tmp_path):
     """The controller drives 100 lockstep ticks (gyro/step from a start paused), is killed, and the run resumes:
     the watchdog fires at the next tick and zeroes every current, recorded like a command. The pause makes it
