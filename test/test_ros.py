@@ -145,9 +145,12 @@ def test_replay_republishes_a_bag(ros, tmp_path):
 
     record_result(gyro_sim_run, bag)
     out = tmp_path / "seen.json"
-    probe = ros.start(PROBE, "listen", str(out), str(PROBE_WINDOW), "501", "/gyro/kinetic_moment", "/clock", "/gyro/imu")
+    # the probe listens at most 100 s (less than finish's 180 s: a miss is a count below, not a timeout); the bag is
+    # replayed at 1/10 of its pace: a reader on a loaded machine lagging by up to a second (100 samples, the QoS
+    # depth of the state topics) loses none (at full pace, 1 kHz bursts overran a lagging reader's history)
+    probe = ros.start(PROBE, "listen", str(out), "100", "501", "/gyro/kinetic_moment", "/clock", "/gyro/imu")
     wait_ready(out)
-    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "1.0", "--wait-for-subscribers", "3", "--startup-timeout",
+    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "0.1", "--wait-for-subscribers", "3", "--startup-timeout",
                     "60")  # the probe's three subscriptions
     code, text = finish(rep)
     assert code == 0, text
