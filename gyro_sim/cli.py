@@ -59,7 +59,7 @@ exit status:
        a node that failed: one 'error:' line
   130  stopped by SIGINT (Ctrl-C)   }} with --record or --ros: the summary and plot of what was
   143  stopped by SIGTERM           }} recorded; the bag is complete, marked interrupted
-  129  stopped by SIGHUP (in-process)
+  129  stopped by SIGHUP (the terminal closed)
 
 a recorded run writes its bag as it goes: a kill -9 or a crash loses at most the last
 second; 'gyro-sim bag recover BAG' rebuilds such a bag.
@@ -444,7 +444,7 @@ def _run_ros(args, scene, name) -> int:
                   with_controller=scene.controller is not None)
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
-    stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM)}.get(code)
+    stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
     if stopped_by is None:
         return _error(f"the simulator node ended with status {code}"
                       + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))

@@ -16,8 +16,6 @@ What each effect does in the right-hand side (:func:`gyro_sim.kernels.nonlinear_
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 

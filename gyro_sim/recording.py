@@ -125,18 +125,49 @@ def exit_status(exc: BaseException) -> int:
     return exc.exit_status if isinstance(exc, RunInterrupted) else 128 + int(signal.SIGINT)
 
 
+#: [depth of the write sections open, the signal held meanwhile]: a signal that arrives while one sample's
+#: messages are written is raised when they all are, so a bag never ends in half a sample
+_HOLD: list = [0, None]
+
+
+def _interrupt(signum: int) -> KeyboardInterrupt:
+    return KeyboardInterrupt() if signum == signal.SIGINT else RunInterrupted(signum)
+
+
+@contextmanager
+def _held_signals() -> Iterator[None]:
+    """A section no signal handler of :func:`sigterm_as_interrupt` breaks: a signal that arrives within is
+    raised at its end (cheap: a counter, no system call)."""
+    _HOLD[0] += 1
+    try:
+        yield
+    finally:
+        _HOLD[0] -= 1
+        if _HOLD[0] == 0 and _HOLD[1] is not None:
+            signum, _HOLD[1] = _HOLD[1], None
+            raise _interrupt(signum)
+
+
 @contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
     """Within the block, SIGTERM and SIGHUP raise :class:`RunInterrupted` (a KeyboardInterrupt, as Ctrl-C
-    raises), so ``finally`` / ``with BagRecorder`` close the bag. Main thread only (elsewhere a no-op)."""
+    raises) and Ctrl-C (while Python's default handler is in place) a KeyboardInterrupt, so ``finally`` /
+    ``with BagRecorder`` close the bag. A signal that arrives while a sample is written to a bag is raised once
+    the sample is whole. Main thread only (elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def _raise(signum, frame):
-        raise RunInterrupted(signum)
+        if _HOLD[0]:
+            _HOLD[1] = _HOLD[1] or signum
+            return
+        raise _interrupt(signum)
 
-    old = {sig: signal.signal(sig, _raise) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    sigs = [signal.SIGTERM, signal.SIGHUP]
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        sigs.append(signal.SIGINT)
+    old = {sig: signal.signal(sig, _raise) for sig in sigs}
     try:
         yield
     finally:
@@ -506,11 +537,12 @@ class BagRecorder:
                         w.write(self._conns[TOPIC_TF_STATIC], ns, self._serialize(TOPIC_TF_STATIC, self._static_tf))
                         self.counts[TOPIC_TF_STATIC] += 1
                     self._scene_written = True
-                for topic, data in items:
-                    w.write(self._conns[topic], ns, data)
-                    self.counts[topic] += 1
-                if t_sample is not None:
-                    self.t_last = t_sample
+                with _held_signals():  # (one sample: all its messages or none)
+                    for topic, data in items:
+                        w.write(self._conns[topic], ns, data)
+                        self.counts[topic] += 1
+                    if t_sample is not None:
+                        self.t_last = t_sample
                 self._maybe_close_chunk(ns)
             except OSError as exc:
                 self._failed = self._salvage(exc)

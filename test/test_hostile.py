@@ -229,7 +229,7 @@ def test_duplicate_keys_are_refused(pure):
         parse_scene_text(dup, "dup.yaml", pure=pure)
     msg = str(ei.value)
     print(f"\n  {msg}")
-    assert f"key 'duration' is given twice" in msg and f"first at line {first}" in msg
+    assert "key 'duration' is given twice" in msg and f"first at line {first}" in msg
     assert f"line {len(text.splitlines()) + 1}," in msg
     # a merge key may still be overridden (that is what it is for)
     assert parse_scene_text("a: &a {x: 1, y: 2}\nb: {<<: *a, x: 3}\n", pure=pure)["b"] == {"x": 3, "y": 2}

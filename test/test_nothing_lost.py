@@ -77,7 +77,8 @@ def _check_bag(bag: Path) -> tuple[dict, object]:
     return info, data
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)],
+                         ids=["SIGINT", "SIGTERM", "SIGHUP"])
 def test_signal_mid_run_in_process_leaves_the_bag_and_its_summary(tmp_path, sig, status):
     """Defect 1: Ctrl-C or SIGTERM during `gyro-sim run SCENE --record BAG` left no bag (written only after the
     run). Now: the bag holds the run up to the signal, says so, its duration is the time it covers, the summary is

@@ -605,6 +605,36 @@ def test_close_defers_a_second_ctrl_c():
     assert done
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_within_a_sample_ends_the_bag_after_the_whole_sample(tmp_path, sig):
+    """CI failure: a Ctrl-C between two messages of one sample left half a sample as the bag's last stamp while
+    gyro_sim.duration named the sample before (3.0 against 3.02). Now the signal is raised once the sample is
+    written: the last stamp holds every state topic and is the bag's duration."""
+    from gyro_sim.recording import BagRecorder, read_bag, sigterm_as_interrupt
+
+    bag = tmp_path / "bag"
+    z3 = np.zeros(3)
+    with pytest.raises(KeyboardInterrupt):
+        with sigterm_as_interrupt(), BagRecorder(bag, "x: 1\n", "child") as rec:
+            rec.write_sample(0.0, z3, [1.0, 0, 0, 0], z3, z3, z3, NAMES, z3, z3, z3)
+            real = rec._writer.write
+            sent = []
+
+            def write(conn, ns, data):  # the signal arrives after the first message of the second sample
+                real(conn, ns, data)
+                if ns and not sent:
+                    sent.append(ns)
+                    os.kill(os.getpid(), sig)
+
+            rec._writer.write = write
+            rec.write_sample(0.02, z3, [1.0, 0, 0, 0], z3, z3, z3, NAMES, z3, z3, z3)
+            rec.write_sample(0.04, z3, [1.0, 0, 0, 0], z3, z3, z3, NAMES, z3, z3, z3)
+    data = read_bag(bag)
+    assert sent and data.t.tolist() == [0.0, 0.02]
+    assert not np.isnan(data.L).any() and not np.isnan(data.q).any() and not np.isnan(data.torque).any()
+    assert float(bag_info(bag)["custom"]["gyro_sim.duration"]) == 0.02
+
+
 @pytest.mark.ros
 def test_rclpy_messages_serialize_to_the_same_cdr_as_the_bag():
     """to_ros on the real rclpy classes gives the message the bag holds: rclpy reads the bag's

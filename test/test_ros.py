@@ -145,9 +145,12 @@ def test_replay_republishes_a_bag(ros, tmp_path):
 
     record_result(gyro_sim_run, bag)
     out = tmp_path / "seen.json"
-    probe = ros.start(PROBE, "listen", str(out), str(PROBE_WINDOW), "501", "/gyro/kinetic_moment", "/clock", "/gyro/imu")
+    # the probe listens at most 100 s (less than finish's 180 s: a miss is a count below, not a timeout); the bag is
+    # replayed at 1/10 of its pace: a reader on a loaded machine lagging by up to a second (100 samples, the QoS
+    # depth of the state topics) loses none (at full pace, 1 kHz bursts overran a lagging reader's history)
+    probe = ros.start(PROBE, "listen", str(out), "100", "501", "/gyro/kinetic_moment", "/clock", "/gyro/imu")
     wait_ready(out)
-    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "1.0", "--wait-for-subscribers", "3", "--startup-timeout",
+    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "0.1", "--wait-for-subscribers", "3", "--startup-timeout",
                     "60")  # the probe's three subscriptions
     code, text = finish(rep)
     assert code == 0, text
@@ -158,6 +161,26 @@ def test_replay_republishes_a_bag(ros, tmp_path):
     for topic, n in seen["counts"].items():
         assert n == counts[topic]["count"], (topic, n)
     assert seen["stamps"] == sorted(seen["stamps"])
+
+
+def test_replay_stopped_by_a_signal_says_so_in_its_status(ros, tmp_path):
+    """A replay ended by SIGTERM exited 0 like a whole one (scripts could not tell them apart): now 143, and its
+    last line says it was interrupted."""
+    bag = tmp_path / "src"
+    from gyro_sim.recording import record_result
+
+    record_result(gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.5), bag)
+    out = tmp_path / "seen.json"
+    probe = ros.start(PROBE, "listen", str(out), str(PROBE_WINDOW), "1", "/clock")  # ends at its first message
+    wait_ready(out)
+    # 500 s of wall time at this rate; the first message goes out once the probe is matched
+    rep = ros.start("-m", "gyro_sim.ros.replay", str(bag), "0.001", "--wait-for-subscribers", "1",
+                    "--startup-timeout", "120")
+    finish(probe)  # the replay is publishing: its signal handlers are in place
+    assert rep.poll() is None
+    rep.send_signal(signal.SIGTERM)
+    code, text = finish(rep, 120)
+    assert code == 143 and "interrupted by SIGTERM" in text, text
 
 
 def test_killing_the_controller_triggers_the_watchdog(ros, tmp_path):
@@ -219,8 +242,11 @@ def test_malformed_commands_are_refused_with_reasons(ros, tmp_path):
     out = tmp_path / "status.json"
     probe = ros.start(PROBE, "listen", str(out), str(PROBE_WINDOW), "0", "/gyro/status")
     wait_ready(out)
-    sim = ros.simulator(scene="nutation_oblate", mode="realtime", duration=4.0, watchdog_timeout=0.0)
     bad = ros.start(PROBE, "bad_commands", str(PROBE_WINDOW), "0")
+    # the run starts once both probes subscribe to gyro/status (on a loaded machine the flooder could come up after
+    # a 4 s run had ended, then wait for a 'done:' that was gone: the test timed out)
+    sim = ros.simulator(scene="nutation_oblate", mode="realtime", duration=4.0, watchdog_timeout=0.0,
+                        wait_for_subscribers=2, startup_timeout=120.0)
     code, text = finish(sim)
     assert code == 0, text
     finish(bad)

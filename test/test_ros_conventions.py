@@ -214,7 +214,10 @@ def test_fault_injection_is_reproducible_and_reaches_the_controller(ros, tmp_pat
     bags = []
     for k in range(2):
         bag = tmp_path / f"faulty{k}"
-        sim = ros.simulator(scene="nutation_oblate", duration=0.3, record=bag, **FAULTS)
+        # the first run starts once the controller (imu, kinetic_moment) and the probe (imu) subscribe: a loaded
+        # machine discovered the probe after the 0.3 s run had ended (it saw no gyro/imu); the probe ends at its first
+        sim = ros.simulator(scene="nutation_oblate", duration=0.3, record=bag, wait_for_subscribers=3 - k,
+                            startup_timeout=120.0, **FAULTS)
         ros.controller(scene="nutation_oblate")
         code, text = finish(sim)
         assert code == 0, text

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 #: SIGINT/SIGTERM: what stops the nodes (and ``gyro-sim run --ros``) cleanly
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # (SIGHUP: the terminal closed; 129)
 #: the environment variable naming the process a node must not outlive (:func:`gyro_sim.ros.common.watch_parent`)
 PARENT_PID_ENV = "GYRO_SIM_PARENT_PID"
 STOP_GRACE = 30.0  # wall s the simulator has, after a forwarded signal, to close its bag before SIGKILL
@@ -67,9 +67,9 @@ def ros_env(domain_id: Optional[int] = None) -> dict:
 #: (one that came meanwhile is delivered now); node_main (gyro_sim.ros.common) replaces that handler when it starts.
 #: So a Ctrl-C while a node starts up or imports ends it without a KeyboardInterrupt traceback.
 NODE_BOOT = ("import runpy, signal, sys\n"
-             "for s in (signal.SIGINT, signal.SIGTERM):\n"
+             "for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):\n"
              "    signal.signal(s, lambda signum, frame: sys.exit(128 + signum))\n"
-             "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})\n"
+             "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM, signal.SIGHUP})\n"
              "del sys.argv[0]\n"
              "runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)\n")
 

@@ -16,7 +16,9 @@ from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 
 from ..messages import QOS, TOPICS, node_topic
-from .common import flush_publishers, message_class, qos_profile, stop_on_signals, wait_for_matches
+from .common import (StopEvent, exit_status, flush_publishers, message_class, qos_profile, stop_on_signals,
+                     wait_for_matches)
+from .launch import signal_name
 
 
 def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wait_for: int = 0,
@@ -99,12 +101,14 @@ def main(argv=None) -> int:
     """``python -m gyro_sim.ros.replay BAG [RATE] [--wait-for-subscribers N] [--startup-timeout S]``."""
     args = parse_args(sys.argv[1:] if argv is None else argv)
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = threading.Event()
+    stop = StopEvent()
     restore = stop_on_signals(stop)
     try:
         n = replay(args.bag, args.rate, stop, args.wait_for_subscribers, args.startup_timeout)
-        print(f"replay: published {n} messages from {args.bag}", file=sys.stderr)
-        return 0
+        status = exit_status(stop)  # 130 / 143 when a signal ended it: scripts can tell it from a whole replay
+        print(f"replay: published {n} messages from {args.bag}"
+              + (f" (interrupted by {signal_name(status - 128)})" if status else ""), file=sys.stderr)
+        return status
     finally:
         restore()
         if rclpy.ok():
