@@ -18,8 +18,8 @@ from typing import Optional, Sequence
 import numpy as np
 
 from . import effects, frozen_flow, kernels
-from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, SHADOW_RATIO, STEPS_WARN, ErrorControl, ErrorEstimate, auto_plan, field_rates, mode_plan, spin_reach,
-                       is_legacy, step_plan, truncated_model)
+from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, SHADOW_RATIO, STEPS_WARN, STIFF, ErrorControl, ErrorEstimate,
+                       auto_plan, field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
 from .accuracy import warn as accuracy_warning
 from .compile_watch import CompileClock
 from .conductor import DEFAULT_N_MODES
@@ -998,6 +998,7 @@ class Runner:
             for m, k in ctl.weights.items():
                 if not k or k >= R_MEASURABLE * ctl.shadow_steps.get(m, 0):
                     continue  # (measured)
+                m = "etdrk4" if m == STIFF else m
                 knob = (sim.step_plan.rate_change / sim.step_div if m == "frozen_flow"
                         else sim.step_plan.steps_per_turn[m] * sim.step_div)
                 pL, pq = sim.step_plan.predicted(m, knob)

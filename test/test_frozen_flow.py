@@ -3,7 +3,6 @@
 Each test reports the difference it measured against a stated tolerance. References: lawson8 at many steps
 per turn (its own error on these horizons is below 1e-10, docs/numerics.md).
 """
-import math
 
 import numpy as np
 import pytest
