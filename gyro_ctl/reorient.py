@@ -300,8 +300,7 @@ def scene_constants(scene, stators: Sequence[str] = ("z1", "z2", "z3")) -> dict:
     from gyro_sim.conductor import conductor_model
 
     cond = scene.rotor.conductor
-    model = conductor_model(cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness,
-                            n_modes=scene.modes)
+    model = conductor_model(cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness)  # (k_e: any N)
     b = {s.name: float(s.coil_constant) for s in scene.stators}
     return {"inertia": [float(v) for v in scene.rotor.inertia], "k_e": float(model.k_e),
             "coil_constants": {n: b[n] for n in stators}}

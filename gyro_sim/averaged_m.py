@@ -193,13 +193,18 @@ def response_of_scene(scene: Scene, exact: bool = False):
     τ1 the slowest eddy time constant (s).
 
     By default ĝ is the one the full model integrates (``torque_model: lag`` → the modal model with
-    ``scene.modes`` modes and its static tail; ``quasi_static`` → iωτ_eff, [K] (1.2)); ``exact=True``
+    the modes (and tail term) a run of the scene chooses, gyro_sim.accuracy.scene_conductor; ``quasi_static`` → iωτ_eff, [K] (1.2)); ``exact=True``
     takes the closed forms [M] (2.13)–(2.15) of :mod:`gyro_sim.conductor` instead.
     """
     c = scene.rotor.conductor
     if c is None or scene.torque_model == "none":
         raise SceneError("averaged_m: the [M] equations need a conducting rotor with torque_model lag or quasi_static")
-    cond = conductor_model(c.kind, c.outer_radius, c.conductivity, thickness=c.thickness, n_modes=scene.modes)
+    if scene.torque_model == "lag":  # the modes (and tail) a run of the scene integrates (gyro_sim.accuracy)
+        from .accuracy import scene_conductor
+
+        cond = scene_conductor(scene, quiet=True)
+    else:
+        cond = conductor_model(c.kind, c.outer_radius, c.conductivity, thickness=c.thickness)
     S = float(cond.moment_scale)
     tau1 = float(np.max(cond.tau)) if cond.tau.size else float(cond.tau_eff)
     if exact:

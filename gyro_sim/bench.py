@@ -62,6 +62,8 @@ DEFAULT_SCENES = ("spinup_thin_shell", "spinup_solid_sphere")
 # one scene (or two) for each averaged model: the spin-up model, [M]'s, [K]'s (three stators, ψ-switching)
 AVERAGED_SCENES = ("spinup_thin_shell", "constant_field", "rotating_field", "three_stators", "nutation_slow")
 TARGET_ERROR = 1e-6
+#: accuracy.rtol of the averaged-models part: the averaged models enter at their MU_MAX (gyro_sim.fidelity.mu_max)
+AVERAGED_PART_RTOL = 2e-3
 OURS = "gyro_sim"  # method label prefix of the project's integrator
 #: right-hand-side evaluations per step (frozen_flow: its two closed-form passes)
 STAGES = {"lawson8": 12, "etdrk4": 4, "frozen_flow": 2}
@@ -286,7 +288,7 @@ def run_ours(scene_name: str, horizon: float, value: Optional[float] = None, lev
     (the stepper the run starts with) + 1 per output sample (the torque).
     """
     from .scene import load_scene
-    from .simulate import DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN, run
+    from .simulate import Simulator, run
 
     method = level_method(scene_name, level, extra)
     knob = knob_of(method)
@@ -294,14 +296,16 @@ def run_ours(scene_name: str, horizon: float, value: Optional[float] = None, lev
     if value is not None:
         ov[f"integrator.{knob}"] = int(value) if knob == "steps_per_turn" else float(value)
     scene = load_scene(scene_name, overrides=ov)
-    wall, cpu, res = _timed(lambda: run(scene, duration=horizon), min_wall, max_reps)
+    # at a given knob the integrator alone (no error control's shadow run); the default run as a user gets it
+    wall, cpu, res = _timed(lambda: run(scene, duration=horizon, estimate=None if value is None else False),
+                            min_wall, max_reps)
     steps = int(res.steps)
     # per step + 1 per output sample; an averaged stretch adds its own (solve_ivp) count
     rhs = STAGES[method] * steps + int(res.t.size) + int(getattr(res, "averaged_rhs_evaluations", 0) or 0)
     segments = getattr(res, "averaged_segments", None) or []
-    if value is None:
-        value = getattr(scene.integrator, knob) or (DEFAULT_RATE_CHANGE if knob == "rate_change"
-                                                    else DEFAULT_STEPS_PER_TURN[method])
+    if value is None:  # the knob the run's plan starts with (gyro_sim/accuracy.py; its error control may change it)
+        plan = Simulator(scene, horizon=horizon, quiet=True).step_plan
+        value = plan.rate_change if knob == "rate_change" else plan.steps_per_turn[method]
     return Row(scene_name, horizon, _method_label(level), knob, float(value), wall, steps, int(rhs),
                L=res.L[-1].copy(), q=res.q[-1].copy(), averaged=float(sum(t1 - t0 for t0, t1 in segments)),
                cpu=cpu)
@@ -433,6 +437,9 @@ class BenchConfig:
     averaged_scenes: tuple = AVERAGED_SCENES  # fidelity auto against full on the scenes of each averaged model
     profile: bool = True
     ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
+    accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
+    accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
+    only: Optional[str] = None  # run this part alone ("accuracy")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -478,6 +485,7 @@ class Results:
     savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
+    accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""
@@ -564,9 +572,10 @@ def mode_cost(res: Results) -> None:
     the baseline too."""
     cfg = res.config
     scene, T = cfg.mode_scene, cfg.mode_horizon
-    for level in ("full/etdrk4", "full/frozen_flow"):
+    # at fixed knobs (the old defaults: the plan's would follow each mode count's own accuracy)
+    for level, knob in (("full/etdrk4", 48), ("full/frozen_flow", 1e-4)):
         for n in cfg.mode_counts:
-            r = run_ours(scene, T, None, level, {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+            r = run_ours(scene, T, knob, level, {"modes": int(n)}, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
             res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting, "horizon": T,
                               "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs, "rtf": r.rtf,
                               "ns_per_step": 1e9 * r.cpu / max(r.steps, 1)})
@@ -576,7 +585,7 @@ def mode_cost(res: Results) -> None:
         Tb = cfg.mode_baseline_horizon
         for method in cfg.baselines:
             for n in cfg.mode_counts:
-                ref = run_ours(scene, Tb, None, "full/etdrk4", {"modes": int(n)})
+                ref = run_ours(scene, Tb, 48, "full/etdrk4", {"modes": int(n)})
                 r = run_baseline(scene, Tb, method, 1e-6, float(np.linalg.norm(ref.L)) or 1.0, {"modes": int(n)})
                 res.modes.append({"scene": scene, "modes": n, "method": r.method, "setting": r.setting,
                                   "horizon": Tb, "cpu": r.cpu, "wall": r.wall, "steps": r.steps, "rhs": r.rhs,
@@ -698,7 +707,9 @@ def averaged_models(res: Results) -> None:
 
     cfg = res.config
     for name in cfg.averaged_scenes:
-        sc = load_scene(name, overrides={"fidelity": "full"})
+        # at an rtol that lets the averaged models in at their MU_MAX (the default rtol 1e-6 averages only where
+        # ε ≤ 2e-6: fidelity.mu_max); both runs at that accuracy
+        sc = load_scene(name, overrides={"fidelity": "full", "accuracy.rtol": AVERAGED_PART_RTOL})
         sa = sc.model_copy(update={"fidelity": "auto"})
         for warm in (sc, sa):  # compile what this scene's types need before the clock runs
             run(warm, duration=min(sc.duration, 2.0 / sc.output.rate))
@@ -900,6 +911,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     """Run every part of ``cfg``, write DIR/bench.md, bench.csv, work_precision.png; return the results."""
     res = Results(cfg, started=_dt.datetime.now().astimezone().isoformat(timespec="seconds"), command=command)
     w0 = time.perf_counter()
+    if cfg.only == "accuracy":
+        from .bench_accuracy import accuracy_part
+
+        accuracy_part(res, cfg.mode == "quick", list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     for scene in cfg.scenes:
         work_precision(res, scene, cfg.horizon_of(scene))
     for scene in cfg.long_horizon_scenes:
@@ -922,6 +940,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         from .bench_ros import ros_part
 
         ros_part(res, quick=cfg.mode == "quick")
+    if cfg.accuracy:
+        from .bench_accuracy import accuracy_part
+
+        accuracy_part(res, cfg.mode == "quick", list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
     res.wall_total = time.perf_counter() - w0
     write_outputs(res, Path(out))
     return res
@@ -1019,8 +1041,17 @@ def write_outputs(res: Results, out: Path) -> None:
             wr.writerow([r.scene, f"{r.horizon:g}", r.method, r.knob, f"{r.value:g}", f"{r.cpu:.6g}", f"{r.wall:.6g}",
                          r.steps, "" if r.rhs is None else r.rhs, f"{r.error:.6g}", f"{r.error_L:.6g}",
                          f"{r.rtf:.6g}", r.note])
+    if res.accuracy is not None:
+        from .bench_accuracy import csv_rows
+
+        rows = csv_rows(res.accuracy)
+        with open(out / "accuracy.csv", "w", newline="") as fh:
+            wr = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["scene"])
+            wr.writeheader()
+            wr.writerows(rows)
     (out / "bench.md").write_text(markdown(res))
-    plot_work_precision(res, out / "work_precision.png")
+    if res.rows:
+        plot_work_precision(res, out / "work_precision.png")
 
 
 def machine() -> str:
@@ -1150,6 +1181,10 @@ def markdown(res: Results) -> str:
     from .bench_ros import markdown as ros_markdown
 
     L += ros_markdown(res)
+    if res.accuracy is not None:
+        from .bench_accuracy import markdown_lines
+
+        L += markdown_lines(res.accuracy)
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"
@@ -1208,6 +1243,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenes", metavar="SCENE", nargs="+", default=list(DEFAULT_SCENES),
                    help=f"scenes of the work-precision comparison (default: {' '.join(DEFAULT_SCENES)})")
     p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
+    p.add_argument("--no-accuracy", action="store_true",
+                   help="skip the accuracy part (every built-in scene against the accuracy it states)")
+    p.add_argument("--only", choices=["accuracy"], help="run this part alone")
+    p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
+                   help="scenes of the accuracy part (default: every built-in scene)")
     return p
 
 
@@ -1224,12 +1264,27 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     cfg = (quick_config if args.quick else full_config)(args.scenes)
     cfg.ros = cfg.ros and not args.no_ros
+    cfg.accuracy = not args.no_accuracy
+    cfg.only = args.only
+    if args.accuracy_scenes:
+        try:
+            for s in args.accuracy_scenes:
+                load_scene(s)
+        except SceneError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        cfg.accuracy_scenes = tuple(args.accuracy_scenes)
     command = "gyro-sim bench " + " ".join(sys.argv[1:] if argv is None else list(argv))
     res = run_bench(cfg, args.out, command=command.strip())
     print()
     print("Headline (ratios measured in this run):")
     for line in headline_lines(res):
         print("  " + line)
+    if res.accuracy is not None:
+        from .bench_accuracy import headline as acc_headline
+
+        for line in acc_headline(res.accuracy):
+            print("  " + line)
     print(f"wrote {args.out / 'bench.md'}, {args.out / 'bench.csv'}, {args.out / 'work_precision.png'} "
           f"({res.wall_total:.1f} s)")
     return 0

@@ -241,7 +241,8 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
 
     Keys used: spin_rate (rad/s), spin_rev_s (rev/s), theta_deg (deg), L_norm
     (N·m·s), energy (J), t_end (s), wall_time (s), steps, realtime_factor, attitude (False: a run
-    without attitude, whose θ is not known and whose spin rate is |Ω|).
+    without attitude, whose θ is not known and whose spin rate is |Ω|), error_L, error_attitude,
+    accuracy_rtol, accuracy_attitude, accuracy_met (the run's estimated error, gyro_sim.accuracy).
     Missing keys are shown as '-'.
     """
     s = summary.get
@@ -259,6 +260,14 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
         ("steps", _num(s('steps'), 'd')),
         ("real-time factor", _num(s('realtime_factor'), '.4g')),
     ]
+    if s("error_L") is not None and s("error_L") == s("error_L"):  # (NaN: no estimate)
+        eq = s("error_attitude")
+        tol_q = s("accuracy_attitude")
+        att = (f"attitude {eq:.2g} rad" + (f" ({tol_q:g})" if tol_q is not None and tol_q == tol_q else "")
+               if eq is not None and eq == eq else "attitude not a result")
+        rows.append(("estimated error", f"L {s('error_L'):.2g}" + (f" (rtol {s('accuracy_rtol'):g})"
+                                                                  if s("accuracy_rtol") else "") + f", {att}"
+                     + ("" if s("accuracy_met") is not False else "  (beyond the scene's accuracy)")))
     if plot_path is not None:
         rows.append(("plot", str(plot_path)))
     width = max(len(label) for label, _ in rows)
@@ -485,11 +494,22 @@ def _bag_result(bag: Path):
                           stator_names=b.stator_names, scene=SimpleNamespace(name=b.scene_name or bag.name))
     wall = info["custom"].get("gyro_sim.wall_time")
     steps = info["custom"].get("gyro_sim.steps")
+    est = None
+    if info["custom"].get("gyro_sim.error_estimate"):
+        from gyro_sim.accuracy import ErrorEstimate
+        from gyro_sim.simulate import error_summary
+
+        try:
+            est = ErrorEstimate.from_json(str(info["custom"]["gyro_sim.error_estimate"]))
+        except (ValueError, TypeError, KeyError):
+            est = None
     summary = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
                "theta_deg": float(np.degrees(b.euler[-1, 1])), "L_norm": float(np.linalg.norm(b.L[-1])),
                "energy": float(energy[-1]), "t_end": float(b.t[-1]),
                "wall_time": float(wall) if wall else None, "steps": int(steps) if steps else None,
                "realtime_factor": float(b.t[-1]) / float(wall) if wall else None}
+    if est is not None:
+        summary.update(error_summary(est))
     return res, summary, b, info
 
 
@@ -763,7 +783,25 @@ def main(argv=None) -> int:
         return sweep_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
+    _one_line_accuracy_warnings()
     return args.func(args)
+
+
+def _one_line_accuracy_warnings() -> None:
+    """Show the runs' accuracy warnings (gyro_sim.accuracy.AccuracyWarning) as one ``warning:`` line each."""
+    import warnings
+
+    from gyro_sim.accuracy import AccuracyWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, AccuracyWarning):
+            _write(sys.stderr, f"warning: {message}\n")
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
 
 
 if __name__ == "__main__":

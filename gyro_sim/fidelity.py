@@ -54,6 +54,17 @@ from .scene import Scene, SceneError
 from .simulate import RunResult, Runner
 
 THETA_MAX = 0.1  # rad
+#: the averaged models' error of L is at most about this times their averaging parameter ε at entry (measured on
+#: the built-in scenes: 0.01 for the spin-up model, 0.04 for [K] on three_stators, 0.4 for [K] ψ-switching on
+#: nutation_slow; docs/benchmark.md): entry needs ε ≤ accuracy.rtol / AVERAGED_ERROR (and ≤ MU_MAX)
+AVERAGED_ERROR = 0.5
+
+
+def mu_max(runner: Runner) -> float:
+    """The averaging parameter's entry bound of a run: ``MU_MAX``, lowered to ``accuracy.rtol`` /
+    :data:`AVERAGED_ERROR` so that an averaged stretch keeps the scene's accuracy (the averaged models' error is
+    O(ε))."""
+    return min(MU_MAX, runner.scene.accuracy.rtol / AVERAGED_ERROR)
 RHO_MAX = 1e-3  # rad
 RECHECK = 0.1  # the regions are tested again after this fraction of the slow time |L|/|N|
 
@@ -166,8 +177,9 @@ def averaged_region(runner: Runner) -> tuple[Optional[int], str]:
         return None, f"L is {rho:.2e} rad off the stator axis (limit {RHO_MAX:g})"
     # μ before θ: a scalar formula, and the test that fails through a spin-up from rest
     mu = _model(runner, k).mu(Ln)
-    if mu > MU_MAX:
-        return None, f"μ = {mu:.2e} > {MU_MAX:g} (spin too low for the averaging)"
+    if mu > mu_max(runner):
+        return None, (f"μ = {mu:.2e} > {mu_max(runner):g} (spin too low for the averaging at accuracy.rtol "
+                      f"{runner.scene.accuracy.rtol:g})")
     x = runner.control_input()
     if x.theta > THETA_MAX:
         return None, f"θ = {x.theta:.3g} rad > {THETA_MAX:g}"
@@ -220,7 +232,7 @@ def _handover_to_full(runner: Runner, k: int, L: float, theta: float) -> None:
         sim.y[7 + 3 * n: 10 + 3 * n] = gn.real * Bb - gn.imag * b_im
 
 
-def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
+def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optional[bool] = None) -> RunResult:
     """``fidelity: auto`` (and ``averaged``): full model where needed, the averaged model elsewhere.
 
     The regions are tested where the commands change and otherwise every ``RECHECK`` of the slow time
@@ -232,7 +244,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None) -> RunResult:
     """
     from gyro_ctl.laws import make_law, make_switching
 
-    r = Runner(scene, duration, sample_breaks=False)
+    r = Runner(scene, duration, sample_breaks=False, estimate=estimate)
     sim = r.sim
     ctl = scene.controller
     law = make_law(ctl) if ctl is not None else None
@@ -294,14 +306,21 @@ def _averaged_stretch_if_any(r: Runner, law, switched: set, cmd_times: list, seg
         return 0, None, False, why_law
     k, why = averaged_region(r)
     if k is not None:
-        return _averaged_stretch(r, k, cmd_times, segments), "spin-up", False, ""
+        r.averaged_eps.append(_model(r, k).mu(float(np.linalg.norm(r.sim.y[0:3]))))
+        n = _averaged_stretch(r, k, cmd_times, segments)
+        r.resync_shadow()
+        return n, "spin-up", False, ""
     m, why_m = m_region(r)
     if m is not None:
+        r.averaged_eps.append(mu_max(r))  # (the region's bound: [M]'s μ_eff at entry is below it)
         n, edge = _m_stretch(r, m, cmd_times, segments)
+        r.resync_shadow()
         return n, "[M]", edge, ""
     kk, why_k = k_region(r)
     if kk is not None:
+        r.averaged_eps.append(kk.eps_ratio(slow_k_state(r.sim)) * kk.mu_max)
         n, edge = _k_stretch(r, kk, cmd_times, segments)
+        r.resync_shadow()
         return n, "[K]", edge, ""
     return 0, None, False, f"{why}; [M]'s averaged model: {why_m}; [K]'s averaged model: {why_k}"
 
@@ -418,7 +437,7 @@ def m_region(runner: Runner) -> tuple[Optional[AveragedM], str]:
     if model is None:
         return None, why
     y = slow_state(runner.sim)
-    ok, why = model.region(L=y[0], rho=y[1], theta=y[3], mu_max=MU_MAX)
+    ok, why = model.region(L=y[0], rho=y[1], theta=y[3], mu_max=mu_max(runner))
     return (model, "") if ok else (None, why)
 
 
@@ -443,7 +462,7 @@ def _m_stretch(r: Runner, model: AveragedM, cmd_times: list, segments: list) -> 
     t0 = sim.t
     y0 = slow_state(sim)
     atol = np.array([1e-12 * max(y0[0], 1e-300), 1e-12, 1e-12, 1e-12])
-    sol, rows, t1, y1, edge = _integrate_slow(r, model.rhs, y0, atol, model.exit_events(MU_MAX),
+    sol, rows, t1, y1, edge = _integrate_slow(r, model.rhs, y0, atol, model.exit_events(mu_max(r)),
                                               _stretch_end(r, cmd_times), "[M]")
     n = rows.size
     if n:
@@ -491,7 +510,12 @@ def k_region(runner: Runner) -> tuple[Optional[SlowK], str]:
     cache = runner.__dict__.setdefault("_slow_k", {})
     key = commands_key(runner.sim)
     if key not in cache:
-        cache[key] = slow_k_of(runner)
+        model, why = slow_k_of(runner)
+        if model is not None:
+            from dataclasses import replace
+
+            model = replace(model, mu_max=mu_max(runner))
+        cache[key] = (model, why)
     model, why = cache[key]
     if model is None:
         return None, why

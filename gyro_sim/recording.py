@@ -673,7 +673,11 @@ def record_result(result: "RunResult", path: Union[str, os.PathLike],
     groups = [(float(t), list(nm), _command_values(cur), _command_values(rate))
               for t, nm, cur, rate in getattr(result, "commands", []) if t < t_end]
     ext = {"gyro_sim.steps": int(result.steps),
-           "gyro_sim.wall_time": float(result.wall_time)}
+           "gyro_sim.wall_time": float(result.wall_time),
+           # the duration the run's accuracy plan was made for (a run's last sample is at its end; gyro_sim.rerun)
+           "gyro_sim.planned_duration": repr(t_end)}
+    if getattr(result, "error_estimate", None) is not None:  # the run's estimated error (gyro_sim.accuracy)
+        ext["gyro_sim.error_estimate"] = result.error_estimate.to_json()
     ext.update(extra or {})
     rows = (result.t.tolist(), result.L.tolist(), result.q.tolist(), result.omega_b.tolist(),
             result.euler.tolist(), result.torque.tolist(), result.current.tolist(),
@@ -870,8 +874,9 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
                 rec.set_custom("gyro_sim.steps", int(r.sim.steps))
                 rec.set_custom("gyro_sim.wall_time", float(r.wall_time))
                 rec.set_custom("gyro_sim.compile_time", float(r.compile_time))
+                rec.set_custom("gyro_sim.error_estimate", r.error_estimate().to_json())
     known = dict(scene=scene, stator_names=names, wall_time=r.wall_time, compile_time=r.compile_time,
-                 steps=r.sim.steps, attitude=True)
+                 steps=r.sim.steps, attitude=True, error_estimate=r.error_estimate())
     if kept.rows is not None:
         return _RunResult(**known, **kept.rows.series(), commands=kept.commands)
     preview = _RunResult(**known, **kept.preview.series(kept.last))

@@ -25,8 +25,11 @@ def rerun_bag(path) -> dict:
     where = f"{Path(path)} (embedded scene)"
     scene = scene_from_dict(parse_scene_text(b.scene_text, where), where=where)
     period = b.custom.get("gyro_sim.control_period")  # the node's ticks (set for scenes without a controller too)
+    # the run's accuracy plan and error control were made for its planned duration (an interrupted bag ends before)
+    planned = b.custom.get("gyro_sim.planned_duration")
     runner = Runner(scene, float(b.t[-1]), attitude=True,  # bags are recorded with the attitude
-                    control_period=float(period) if period else None)
+                    control_period=float(period) if period else None,
+                    horizon=float(planned) if planned else None)
     cmds: dict[int, list] = defaultdict(list)
     for i, t in enumerate(b.command_t):
         cmds[stamp_ns(t)].append(i)

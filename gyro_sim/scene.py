@@ -23,7 +23,15 @@ Format (all keys but ``rotor``, ``duration`` optional)::
         thickness: 0.001             # r2 − r1, m (thin_shell, shell)
         conductivity: 2.5e7          # σ, S/m
     torque_model: lag                # none | quasi_static | lag  (physics.md §3)
-    modes: 10                        # eddy modes kept by the lag model of a solid sphere / shell
+    accuracy:                        # what the run must hold over its whole duration (gyro_sim/accuracy.py)
+      rtol: 1.0e-6                   # relative tolerance on L (default 1e-6)
+      attitude: 1.0e-6               # absolute tolerance on the attitude, rad (default 1e-6; the rotation
+                                     # angle between the computed and the true attitude, spin phase included;
+                                     # null: none, only rtol)
+    modes: null                      # eddy modes kept by the lag model of a solid sphere / shell; default:
+                                     # chosen from accuracy and the largest slip the run can meet (with or
+                                     # without the static tail term); a number given here wins (a warning
+                                     # where it misses the tolerance)
     stators:                         # rotating fields B_k = b_k I_k (e1k cos σ_k + e2k sin σ_k)
       - name: z3
         axis: [0, 0, 1]              # u_k (case frame), normalised on load
@@ -56,9 +64,11 @@ Format (all keys but ``rotor``, ``duration`` optional)::
                                      # etdrk4; frozen_flow: steps longer than a field turn (axisymmetric
                                      # rotor, no effects; gyro_sim/frozen_flow.py, docs/numerics.md)
       steps_per_turn: null           # lawson8/etdrk4: steps per period of the fastest rotation (spin or
-                                     # field); default 12 for lawson8, 48 for etdrk4
+                                     # field); free stepper: per turn of the body-frame motion; default:
+                                     # chosen from accuracy and the run's turns (a number here wins, with a
+                                     # warning where the error model says it misses the tolerance)
       rate_change: null              # frozen_flow: largest change of the body rate per step as a fraction
-                                     # of the fastest rate, by the torque's scale (default 1e-4)
+                                     # of the fastest rate, by the torque's scale (default: from accuracy)
       max_step: null                 # optional upper bound on the step, s
     controller:                      # optional: a law of gyro_ctl run every period (s)
       law: psi_switching             # spinup | psi_switching
@@ -285,9 +295,21 @@ class Output(_Strict):
 
 class Integrator(_Strict):
     method: Literal["auto", "lawson8", "etdrk4", "frozen_flow"] = "auto"
-    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: 12 (lawson8), 48 (etdrk4)
-    rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow; default 1e-4
+    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: from accuracy (gyro_sim/accuracy.py)
+    rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow; default: from accuracy
     max_step: Optional[Positive] = None
+
+
+class Accuracy(_Strict):
+    """What a run must hold over its whole duration against the converged solution of the scene's model:
+    ``rtol`` relative on L (max over the run of |L − L_true| / max|L_true|), ``attitude`` absolute on the attitude
+    (rad: the rotation angle between the computed and the true attitude, the spin phase included; not a result
+    where the attitude is not integrated or was averaged out). Defaults 1e-6 and 1e-6 rad
+    (:data:`gyro_sim.accuracy.DEFAULT_RTOL`, ``DEFAULT_ATTITUDE``). The run chooses its eddy modes and step knobs
+    for them and reports its estimated error (gyro_sim/accuracy.py, ``RunResult.error_estimate``)."""
+
+    rtol: real(ge=1e-13, le=0.1) = 1e-6
+    attitude: Optional[real(ge=1e-13, le=10.0)] = 1e-6  # null: no tolerance on the attitude (only rtol)
 
 
 class Scene(_Strict):
@@ -297,7 +319,8 @@ class Scene(_Strict):
     description: str = ""
     rotor: Rotor
     torque_model: Literal["none", "quasi_static", "lag"] = "lag"
-    modes: count(ge=1, le=500) = 10
+    accuracy: Accuracy = Accuracy()
+    modes: Optional[count(ge=1, le=500)] = None  # None: chosen from accuracy (gyro_sim.accuracy.mode_plan)
     stators: list[Stator] = []
     field: list[FieldTerm] = []
     commands: list[Command] = []
@@ -378,11 +401,18 @@ def max_result_bytes() -> float:
 
 def _eddy_modes(scene: "Scene") -> int:
     """Eddy modes a run carries (3 states each): the lag model's modes of the conductor (one for a thin
-    shell, ``modes`` for a solid sphere or a shell), none without a conductor or with another torque model."""
+    shell, ``modes`` or the number chosen from ``accuracy`` for a solid sphere or a shell: gyro_sim.accuracy.
+    mode_plan), none without a conductor or with another torque model."""
     cond = scene.rotor.conductor
     if cond is None or scene.torque_model != "lag":
         return 0
-    return 1 if cond.kind == "thin_shell" else scene.modes
+    if cond.kind == "thin_shell":
+        return 1
+    if scene.modes is not None:
+        return scene.modes
+    from .accuracy import mode_plan
+
+    return mode_plan(scene, quiet=True).n
 
 
 def result_size(scene: "Scene") -> tuple[float, float, int]:

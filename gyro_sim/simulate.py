@@ -18,7 +18,11 @@ from typing import Optional, Sequence
 import numpy as np
 
 from . import effects, frozen_flow, kernels
+from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, SHADOW_RATIO, STEPS_WARN, STIFF, ErrorControl, ErrorEstimate,
+                       auto_plan, field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
+from .accuracy import warn as accuracy_warning
 from .compile_watch import CompileClock
+from .conductor import DEFAULT_N_MODES
 from .conductor import conductor_model
 from .frames import attitude_from_euler, euler_angles, quat_to_matrix
 from .messages import stamp_ns
@@ -26,11 +30,10 @@ from .scene import Scene, SceneError, merge_times
 
 __all__ = ["Simulator", "RunResult", "run", "stator_triad", "integrates_attitude"]
 
-#: steps per turn of the fastest rotation when the scene gives none: both give L to ~1e-7 over the
-#: default scene's 2 s (docs/benchmark.md); lawson8 at about a quarter of etdrk4's cost
+#: the fixed step knobs of the runs before the accuracy plan (issue 19): steps per turn of the fastest rotation and
+#: the frozen-flow rate_change. Runs now choose their knobs from the scene's ``accuracy`` (gyro_sim/accuracy.py,
+#: ``Simulator.step_plan``); these stay as the benchmark's "today's defaults" (gyro_sim/bench.py)
 DEFAULT_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
-#: frozen_flow: the body rate may change by this fraction of the fastest rate per step (by the torque's
-#: scale): 1e-4 gives ~1e-6 in (L, q) over the default scene's 2 s (docs/numerics.md)
 DEFAULT_RATE_CHANGE = 1e-4
 #: a frozen-flow step costs about this many lawson8 steps per (1 + number of eddy modes): 8 µs against
 #: 1.9 µs with one phasor and one mode, 17–28 µs with ten modes (measured on the default scene and
@@ -115,6 +118,8 @@ class RunResult:
     averaged_rhs_evaluations: int = 0
     effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
     attitude: bool = True  # whether q was integrated (integrates_attitude)
+    # the run's estimated error over its duration, against the scene's accuracy (gyro_sim.accuracy.ErrorEstimate)
+    error_estimate: Optional[ErrorEstimate] = None
     _euler: Optional[np.ndarray] = field(default=None, repr=False)
     _load: Optional[object] = field(default=None, repr=False, compare=False)  # see lazy()
     _preview: Optional["RunResult"] = field(default=None, repr=False, compare=False)
@@ -127,7 +132,7 @@ class RunResult:
         ``preview``: a decimated copy in memory (:meth:`preview`)."""
         obj = cls.__new__(cls)
         obj.__dict__.update({"averaged_segments": [], "averaged_models": [], "averaged_rhs_evaluations": 0,
-                             "attitude": True, "_euler": None}, **known)
+                             "attitude": True, "error_estimate": None, "_euler": None}, **known)
         obj._load, obj._preview = load, preview
         return obj
 
@@ -180,7 +185,8 @@ class RunResult:
 
     def summary(self) -> dict:
         """Final values and cost of the run (SI units; θ in degrees, NaN without attitude; spin_rate: see
-        :attr:`spin_rate`)."""
+        :attr:`spin_rate`) and its estimated error (``error_L`` relative, ``error_attitude`` rad, NaN where not a
+        result; ``accuracy_met``: within the scene's ``accuracy``)."""
         t_end = float(self.t[-1])
         return {
             "scene": self.scene.name,
@@ -195,7 +201,16 @@ class RunResult:
             "steps": int(self.steps),
             "realtime_factor": t_end / self.wall_time if self.wall_time > 0 else float("inf"),
             "attitude": self.attitude,
+            **error_summary(self.error_estimate),
         }
+
+
+def error_summary(est: Optional[ErrorEstimate]) -> dict:
+    """The summary's error keys of an estimate (NaN and None where the run has none)."""
+    if est is None:
+        return {"error_L": math.nan, "error_attitude": math.nan, "accuracy_met": None}
+    return {"error_L": est.L, "error_attitude": est.attitude, "accuracy_met": est.met,
+            "accuracy_rtol": est.rtol, "accuracy_attitude": est.atol}
 
 
 class Simulator:
@@ -206,12 +221,24 @@ class Simulator:
     eddy modes are in the case frame (``self.attitude`` False).
     """
 
-    def __init__(self, scene: Scene, attitude: Optional[bool] = None):
+    def __init__(self, scene: Scene, attitude: Optional[bool] = None, horizon: Optional[float] = None,
+                 quiet: bool = False):
         self.scene = scene
+        self.quiet = quiet  # no accuracy warnings (a shadow run: gyro_sim.accuracy.ErrorControl)
+        # the step is the plan's divided by step_div (the run's error control changes it at its checks); a shadow
+        # run follows its ``leader``: the same stepper, steps SHADOW_RATIO times the leader's
+        self.step_div = 1.0
+        self.leader: Optional["Simulator"] = None
         self.attitude = integrates_attitude(scene, attitude)
         J = scene.inertia
         self.J = J
         self.Jinv = 1.0 / J
+        # the run's accuracy plan (gyro_sim/accuracy.py): made for ``horizon`` s (default: the scene's duration),
+        # the same in-process and in the ROS node
+        self.horizon = float(scene.duration if horizon is None else horizon)
+        self.mode_plan = mode_plan(scene, self.horizon, self.attitude, quiet=quiet)
+        self.slip_met = 0.0  # largest slip bound met at a step plan (rad/s): the modes' error is judged there
+        self._slip_warned = False
         # --- eddy-current model (physics.md §3)
         cond = scene.rotor.conductor
         self.conductor = None
@@ -219,10 +246,18 @@ class Simulator:
         w = np.zeros(0)
         tail = 0.0
         c_m = 0.0
-        if cond is not None and scene.torque_model != "none":
-            self.conductor = conductor_model(
-                cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness, n_modes=scene.modes
-            )
+        if cond is not None and scene.torque_model == "lag" and scene.effects.magnetizable is not None:
+            # the magnetizable body replaces the modes; the conductor gives its default P1, P2 (effects.py)
+            self.conductor = conductor_model(cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness,
+                                             n_modes=scene.modes or DEFAULT_N_MODES)
+        elif cond is not None and scene.torque_model == "lag":
+            mp = self.mode_plan
+            self.conductor = truncated_model(cond.kind, cond.outer_radius, cond.conductivity, cond.thickness, mp.n,
+                                             mp.tail)
+        elif cond is not None and scene.torque_model != "none":
+            self.conductor = conductor_model(cond.kind, cond.outer_radius, cond.conductivity,
+                                             thickness=cond.thickness)  # quasi-static: τ_eff alone (exact)
+        if self.conductor is not None:
             c_m = float(self.conductor.moment_scale)
             if scene.torque_model == "quasi_static":
                 tail = float(self.conductor.tau_eff)  # [K] (1.2)
@@ -286,6 +321,19 @@ class Simulator:
             self._free_axis = -3  # isotropic, modes in the case frame (kernels.free_step)
         self._inv_ref = 1.0 / ref
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
+        # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/accuracy.py): turns of the fastest
+        # rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body motion
+        om_reach = spin_reach(scene, self.horizon)
+        Lmag0 = float(np.linalg.norm(self.y[0:3]))
+        om_plan = max(om_reach, field_rates(scene), self._effect_rate())
+        L_bound = Lmag0 if om_reach <= Lmag0 * float(np.max(self.Jinv)) * (1 + 1e-12) else float(np.max(J)) * om_reach
+        self.L_bound = L_bound  # the largest |L| the run can reach (N m s; gyro_sim.accuracy.ErrorControl)
+        om_free = L_bound * float(np.max(np.abs(self.Jinv - self._inv_ref))) if self._free_axis == -1 else 0.0
+        self.step_plan = step_plan(scene, self.horizon, self.attitude, om_plan, om_free)
+        self._auto_plan = auto_plan(self.step_plan, scene)
+        self._knob_warned: set = set()
+        if not quiet and not is_legacy():
+            self._warn_plan(om_plan)
 
     # --- commands --------------------------------------------------------------------------
     def set_stator(self, k: int, current: Optional[float] = None, rate: Optional[float] = None) -> None:
@@ -354,34 +402,94 @@ class Simulator:
         applies (axisymmetric rotor, no effects) and its step is long enough to be cheaper
         (:data:`FROZEN_FLOW_COST`); ``free`` for the torque-free stepper."""
         if free:
+            self._check_knob("free")
             return "free", self._max_step(True, "free")
         m = self.scene.integrator.method
         if m == "frozen_flow":
+            self._check_knob(m)
             return m, self._frozen_flow_step()
         if m == "auto":
             h = self._max_step(False, "lawson8")
-            if self.tau.size == 0 or h <= 2.0 * float(np.min(self.tau)):
+            t_min = float(np.min(self.tau)) if self.tau.size else math.inf
+            held = False
+            if h > 2.0 * t_min:
+                # a mode is stiff at lawson8's step: ETDRK4 at its own step, or lawson8 held at τ_min (where its
+                # order holds, its shadow's step within 2 τ_min) where that costs less (LAWSON8_COST)
+                h_etd = self._max_step(False, "etdrk4")
+                if t_min >= lawson8_cost(self.tau.size) * h_etd:
+                    h, held = t_min, True
+                else:
+                    m, h = "etdrk4", h_etd
+            if m == "auto":
                 m = "lawson8"
-            else:
-                m, h = "etdrk4", self._max_step(False, "etdrk4")
             if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0:
-                # decided at both steppers' default settings (the choice follows the physics; the
-                # scene's knobs then set the chosen stepper's accuracy)
-                h_ff = self._frozen_flow_step(DEFAULT_RATE_CHANGE)
-                h_def = self._max_step(False, m, DEFAULT_STEPS_PER_TURN[m])
+                # decided at both steppers' settings for the scene's accuracy (the choice follows the physics
+                # and the tolerance; the scene's explicit knobs then set the chosen stepper's accuracy)
+                ap = self._auto_plan
+                h_ff = self._frozen_flow_step(ap.rate_change)
+                h_def = self._max_step(False, m, ap.steps_per_turn[m])
+                if held:
+                    h_def = min(h_def, t_min)
                 if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h_def:
+                    self._check_knob("frozen_flow")
                     return "frozen_flow", self._frozen_flow_step()
+            self._check_knob(m)
             return m, h
+        self._check_knob(m)
         return m, self._max_step(False, m)
+
+    def _warn_plan(self, om_plan: float) -> None:
+        """Warn where the scene's attitude tolerance is below the floor a plan takes (PHASE_REL_MIN of the spin
+        phase), and where the plan predicts a very long run (more than STEPS_WARN steps)."""
+        acc, T = self.scene.accuracy, self.horizon
+        floor = PHASE_REL_MIN * om_plan * T
+        if self.attitude and acc.attitude is not None and acc.attitude < floor:
+            accuracy_warning(
+                f"scene {self.scene.name!r}: accuracy.attitude = {acc.attitude:g} rad cannot be held over {T:g} s: "
+                f"the spin phase the run can turn through is {om_plan * T:.3g} rad, and a run holds it to about "
+                f"{PHASE_REL_MIN:g} of itself; planning for {floor:.2g} rad (the estimate reports what is reached; "
+                f"set accuracy.attitude to at least that, or output.attitude: false where only L matters)")
+        plan = self._auto_plan
+        steps = min(plan.turns * plan.steps_per_turn["lawson8"], plan.turns * plan.steps_per_turn["etdrk4"])
+        if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0 and self.c_m > 0:
+            steps = min(steps, T / self._frozen_flow_step(plan.rate_change))
+        if steps > STEPS_WARN:
+            accuracy_warning(
+                f"scene {self.scene.name!r}: accuracy (rtol {acc.rtol:g}, attitude {acc.attitude} rad) over "
+                f"{T:g} s needs about {steps:.2g} steps ({plan.turns:.3g} turns of the fastest rotation); a looser "
+                f"accuracy runs faster")
+
+    def _check_knob(self, method: str) -> None:
+        """Warn once per stepper where the scene's explicit knob misses its accuracy by the error model
+        (gyro_sim.accuracy.StepPlan.predicted); note the stepper as used (``methods_used``)."""
+        used = self.__dict__.setdefault("methods_used", set())
+        used.add(method)
+        plan = self.step_plan
+        knob = "rate_change" if method == "frozen_flow" else "steps_per_turn"
+        if knob not in plan.explicit or method in self._knob_warned or self.quiet:
+            return
+        if method == "free" and self._free_axis != -1:
+            return  # exact steps
+        self._knob_warned.add(method)
+        eL, eq = plan.predicted(method)
+        if eL > plan.tol_L or eq > plan.tol_q:
+            want = self._auto_plan.rate_change if method == "frozen_flow" else self._auto_plan.steps_per_turn[method]
+            val = plan.rate_change if method == "frozen_flow" else plan.steps_per_turn[method]
+            acc = self.scene.accuracy
+            accuracy_warning(
+                f"scene {self.scene.name!r}: integrator.{knob} = {val:g} cannot meet accuracy (rtol {acc.rtol:g}, "
+                f"attitude {acc.attitude} rad) with {method} over {self.horizon:g} s by the error model: about "
+                f"{eL:.2g} in L, {eq:.2g} rad in the attitude; {knob} = {want:g} would (leave it out to let the run "
+                f"choose)")
 
     def _method(self) -> str:
         """The stepper a field step would take now (see :meth:`_step_plan`)."""
         return self._step_plan(False)[0]
 
     def _max_step(self, free: bool, method: str, spt: Optional[int] = None) -> float:
-        """Largest lawson8/etdrk4/free step (s) at ``spt`` steps per turn (default: the scene's, else the
-        stepper's default) of the fastest rotation, bounded by ``integrator.max_step``."""
-        spt = spt or self.scene.integrator.steps_per_turn or DEFAULT_STEPS_PER_TURN[method]
+        """Largest lawson8/etdrk4/free step (s) at ``spt`` steps per turn (default: the step plan's: the scene's
+        knob, else chosen for its accuracy) of the fastest rotation, bounded by ``integrator.max_step``."""
+        spt = spt or self.step_plan.steps_per_turn[method]
         L = np.linalg.norm(self.y[0:3])
         if free:
             if self._free_axis != -1:
@@ -401,8 +509,8 @@ class Simulator:
         """Largest frozen-flow step (s): the body rate may change by ``rate_change`` of the fastest rate Ω
         (spin or field) per step at the torque's scale N = c|B|²(½Σ|w_n| + T_tail(Ω + ν_max)), the largest
         |m||B| the conductor gives at a slip up to Ω + ν_max (J_min Ω ε / N); ε = ``eps``, else the scene's
-        ``integrator.rate_change``, else :data:`DEFAULT_RATE_CHANGE`."""
-        eps = eps or self.scene.integrator.rate_change or DEFAULT_RATE_CHANGE
+        ``integrator.rate_change``, else the one chosen for the scene's accuracy (``step_plan``)."""
+        eps = eps or self.step_plan.rate_change
         Bre, Bim, _ = self.phasors()
         B = float(np.sum(np.sqrt(np.sum(Bre ** 2, axis=1) + np.sum(Bim ** 2, axis=1))))
         om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
@@ -487,11 +595,62 @@ class Simulator:
         if seg is not None and seg[0] == key and self.t == self._seg_t_end and self.eff[effects.ON] == 0.0:
             return seg[1]
         Bre, Bim, om = self.phasors()
+        self._check_slip(om)
         # no field (or no torque model) and no effect: the geometric free stepper
         free = (om.size == 0 or (self.c_m == 0.0 and self.eff[effects.MAG] == 0.0)) and self.eff[effects.ON] == 0.0
         method, h_max = self._step_plan(free)
+        lead = self.leader
+        if lead is not None:  # a shadow: the leader's stepper (decided on its state), SHADOW_RATIO times its step
+            lm = lead._seg[1][5] if lead._seg is not None else method
+            if lm != method:
+                method, h_max = lm, self._h_for(lm)
+            div = lead.step_div / SHADOW_RATIO[method]
+        else:
+            div = self.step_div
+        if div != 1.0 and math.isfinite(h_max):
+            h_max /= div
+            if self.scene.integrator.max_step is not None:
+                h_max = min(h_max, self.scene.integrator.max_step)
         self._seg = (key, (self.t, Bre, Bim, om, free, method, h_max))
         return self._seg[1]
+
+    def _h_for(self, method: str) -> float:
+        """The largest step (s) of ``method`` now, at the plan's knobs (lawson8 in auto mode: held at τ_min where
+        a mode is stiff at its step, as :meth:`_step_plan` does)."""
+        if method == "free":
+            return self._max_step(True, "free")
+        if method == "frozen_flow":
+            return self._frozen_flow_step()
+        h = self._max_step(False, method)
+        if method == "lawson8" and self.scene.integrator.method == "auto" and self.tau.size:
+            t_min = float(np.min(self.tau))
+            if h > 2.0 * t_min:
+                h = t_min
+        return h
+
+    def replan(self) -> None:
+        """Make the step plan afresh at the next advance (the error control changed ``step_div``)."""
+        self._seg = None
+
+    def _check_slip(self, om: np.ndarray) -> None:
+        """Note the slip bound of a new command segment (fastest field rate + |Ω| now, rad/s) in ``slip_met``; warn
+        once where it passes the slip the eddy modes were chosen for (a command or law beyond the scene's rates:
+        gyro_sim.accuracy.mode_plan) and the modes then miss the tolerance."""
+        slip = float(np.max(np.abs(om), initial=0.0)) + float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv))
+        self.slip_met = max(self.slip_met, slip)
+        mp = self.mode_plan
+        if (self._slip_warned or self.quiet or mp.kind in (None, "thin_shell") or mp.n == 0
+                or slip <= mp.slip * (1 + 1e-9)):
+            return
+        e_g, e_im = mp.error_at(slip)
+        if e_g > mp.tol_g or e_im > mp.tol_im:
+            self._slip_warned = True
+            accuracy_warning(
+                f"scene {self.scene.name!r}: at t = {self.t:.6g} s the slip reaches {slip:.4g} rad/s, beyond the "
+                f"{mp.slip:.4g} rad/s the {mp.n} eddy modes were chosen for (a command or law faster than the "
+                f"scene's rates): their truncation error there is {e_g:.2g} of ĝ, {e_im:.2g} of Im ĝ against "
+                f"tolerances {mp.tol_g:.2g}, {mp.tol_im:.2g}; give the rate in the scene (a stator, command or law "
+                f"parameter) or set modes")
 
     def torque(self) -> np.ndarray:
         """Electrodynamic torque now (case frame, N·m)."""
@@ -540,7 +699,13 @@ class Simulator:
         Lb, _ = body_rates(self.J, Y[:, 0:3], Y[:, 3:7])
         k0 = 7 + 3 * self.tau.size
         return np.array([effects.body_rate(float(ti), *Lb[i], Y[i], k0, self.Jinv, self.eff)
-                         for i, ti in enumerate(np.broadcast_to(t, (Y.shape[0],)))])
+                         for i, ti in enumerate(np.broadcast_to(t, (Y.shape[0],)))]).reshape(-1, 3)
+
+
+def lawson8_cost(n_modes: int) -> float:
+    """A lawson8 step's CPU time in ETDRK4 steps with ``n_modes`` eddy modes: measured 2.1 (one mode), 3.3 (50),
+    4.7 (200) on constant_field and spinup_solid_sphere (1.6, 2.7, 7.2 µs against 0.8, 0.8, 1.6 µs)."""
+    return 2.0 + 0.013 * n_modes
 
 
 def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -569,18 +734,49 @@ class Runner:
     shows the state at t and the field that acted up to t. Used by :func:`run` and by the
     simulator node, so both produce the same numbers. ``attitude``: see :func:`integrates_attitude` (the
     ROS node passes True: it publishes /gyro/imu and /gyro/euler).
+
+    Accuracy (gyro_sim/accuracy.py): the simulator's modes and step knobs are planned for the scene's
+    ``accuracy`` over ``horizon`` s (default: the duration). With ``estimate`` (default) a shadow simulator runs
+    alongside (same commands, same stops, longer steps) and the error control (:class:`gyro_sim.accuracy.
+    ErrorControl`) compares the two at its check instants, which are breaks of every run (so the ROS node and
+    an in-process run decide alike), estimates the error and corrects the step; :meth:`error_estimate` gives the
+    run's estimate. ``estimate=False`` (a run that locates switching events: its bisection re-integrates stretches
+    the shadow cannot follow) runs the plan alone and estimates by the plan's model.
     """
 
     def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
                  attitude: Optional[bool] = None, control_period: Optional[float] = None,
-                 buffer_rows: Optional[int] = None):
+                 buffer_rows: Optional[int] = None, horizon: Optional[float] = None,
+                 estimate: Optional[bool] = None):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
         if control_period is not None and not (math.isfinite(control_period) and control_period > 0):
             raise SceneError(f"control_period = {control_period}: must be a finite number of seconds > 0")
         self.scene, self.T = scene, T
-        self.sim = Simulator(scene, attitude)
+        # the accuracy plan is made for the run's duration (``horizon``: another, e.g. a re-run of an interrupted
+        # bag planned for its whole duration)
+        H = T if horizon is None else float(horizon)
+        self.sim = Simulator(scene, attitude, horizon=H)
+        # the error control and its shadow run (gyro_sim/accuracy.py); checks at fixed fractions of the horizon
+        plan = self.sim.step_plan
+        if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
+            estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
+        self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
+                                    J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound)
+        self.shadow = None
+        if estimate:
+            self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
+            self.shadow.leader = self.sim
+        self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
+        self._ck = 0  # the next check
+        self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
+        self._steps_seen = 0
+        self._impulse = 0.0  # ∫|N| dt over the output samples (N·m·s): the modes' error of L
+        self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
+        self._last_t = 0.0
+        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.Jinv))
+        self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
         t_out = scene.output.sample_times(T)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
@@ -599,9 +795,11 @@ class Runner:
         if self.sim.eff[effects.ON] != 0.0:
             sample_breaks = True
         # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
-        self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0),
-                                                np.array([c.time for c in self._cmds], dtype=float), ticks,
-                                                np.array([T], dtype=float), np.array(sorted(knots), dtype=float)]))
+        # the breaks of every run, samples or not: where the shadow follows (Runner._follow)
+        self._common = np.unique(np.concatenate([np.array([c.time for c in self._cmds], dtype=float), ticks,
+                                                 np.array([T], dtype=float), np.array(sorted(knots), dtype=float),
+                                                 self._checks]))
+        self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0), self._common]))
         # output rows held in memory: all of them, or a buffer of ``buffer_rows`` that release() empties (a
         # streamed run: its rows go to a bag as they come, memory stays flat however long the run)
         if buffer_rows is not None and buffer_rows < 2:
@@ -690,6 +888,8 @@ class Runner:
             if name not in self.sim.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
         self.sim.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+        if self.shadow is not None:
+            self.shadow.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
@@ -713,6 +913,9 @@ class Runner:
             raise RuntimeError(f"output buffer of {self.out_y.shape[0]} rows is full: release() the rows taken")
         with CompileClock() as clock:
             self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
+            self._accumulate(sel, rows)
+            if self.shadow is not None:
+                self._follow(tb, sel)
         self.wall_time += clock.wall
         self.compile_time += clock.compile
         self.cur[rows] = c0
@@ -720,6 +923,103 @@ class Runner:
         self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
         self.apply_scene_commands()
         return out
+
+    # --- accuracy: the shadow run, the checks, the estimate ----------------------------------------
+    def _follow(self, tb: float, sel: np.ndarray) -> None:
+        """Advance the shadow to ``tb`` where that is a break of every run (not an output sample made a break:
+        the ROS node's samples are breaks, an in-process run's are not, and the shadow must take the same steps in
+        both); at a check instant compare and maybe change the step."""
+        sim, sh = self.sim, self.shadow
+        j = int(np.searchsorted(self._common, tb))
+        if j < self._common.size and self._common[j] == tb or not (np.searchsorted(self.breaks, tb) < self.breaks.size
+                                                                   and self.breaks[np.searchsorted(self.breaks, tb)] == tb):
+            method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
+            s0 = sh.steps
+            sh.advance(tb)
+            self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
+                                     exact=free and sim._free_axis != -1,
+                                     stiff=bool(sim.tau.size) and h > float(np.min(sim.tau)))
+            self._steps_seen = sim.steps
+        else:
+            return
+        if self._ck < self._checks.size and tb == self._checks[self._ck]:
+            self._ck += 1
+            # |N| now and its mean since the previous check; whether the shadow's steps were longer there
+            # (from the states at the checks alone: the same in every run, whatever its samples)
+            n_now = float(np.linalg.norm(sim.torque())) if not sim._seg[1][4] else 0.0
+            L0, t0, st0, sst0 = self._at_check
+            n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
+            meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
+            self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
+            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
+            if f is not None:
+                sim.step_div *= f
+                sim.replan()
+                sh.replan()
+
+    def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
+        """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate)."""
+        if not sel.size:
+            return
+        r = slice(rows.start, rows.start + sel.size)
+        dt = np.diff(np.concatenate([[self._last_t], sel]))
+        N = np.linalg.norm(self.out_N[r], axis=1)
+        Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
+        self.control.note_L(float(np.max(Ln)))
+        om = Ln * float(np.max(self.sim.Jinv))
+        # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
+        self._impulse = float(np.cumsum(np.concatenate([[self._impulse], N * dt]))[-1])
+        self._spin_dev = float(np.cumsum(np.concatenate([[self._spin_dev], np.abs(om - self._om0) * dt]))[-1])
+        self._last_t = float(sel[-1])
+
+    def resync_shadow(self) -> None:
+        """The run's state was set from outside (a fidelity hand-over): keep the errors so far and start the
+        shadow afresh from the run's state."""
+        if self.shadow is None:
+            return
+        sim, sh = self.sim, self.shadow
+        self.control.measure(sim, sh)
+        self.control.bank()
+        sh.y[:] = sim.y
+        sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
+        sh._nu_max = sim._nu_max
+        sh.replan()
+
+    def error_estimate(self) -> ErrorEstimate:
+        """The run's estimated error so far (over the whole duration once it is done): the steps' (from the shadow,
+        else the plan's model), the eddy modes' truncation at the largest slip met, the averaged models' O(ε)."""
+        sim, acc = self.sim, self.scene.accuracy
+        ctl = self.control
+        L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
+        if self.shadow is not None:
+            sL, sq, how = *ctl.measure(sim, self.shadow)[2:], "richardson"
+            # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
+            # closer than the step): the plan's model at the knob they ran
+            for m, k in ctl.weights.items():
+                if not k or k >= R_MEASURABLE * ctl.shadow_steps.get(m, 0):
+                    continue  # (measured)
+                m = "etdrk4" if m == STIFF else m
+                knob = (sim.step_plan.rate_change / sim.step_div if m == "frozen_flow"
+                        else sim.step_plan.steps_per_turn[m] * sim.step_div)
+                pL, pq = sim.step_plan.predicted(m, knob)
+                sL, sq, how = sL + pL, sq + pq, "richardson+model"
+        else:
+            used = sorted(getattr(sim, "methods_used", set()) or {"free"})
+            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim._free_axis == -1]
+            sL = max([p[0] for p in pred] + [0.0])
+            sq = max([p[1] for p in pred] + [0.0])
+            how = "model"
+        e_g, e_im = sim.mode_plan.error_at(max(sim.slip_met, 0.0))
+        mL = max(e_g, e_im) * self._impulse / L_max
+        mq = e_im * self._spin_dev
+        from .fidelity import AVERAGED_ERROR
+
+        aL = AVERAGED_ERROR * max(self.averaged_eps, default=0.0)
+        att = sim.attitude and not self.averaged_eps
+        return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq) if att else math.nan, steps_L=sL,
+                             steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
+                             averaged_L=aL, steps_method=how, rtol=acc.rtol,
+                             atol=math.nan if acc.attitude is None else acc.attitude)
 
     # --- exact switching instants ------------------------------------------------------------
     def _snapshot(self) -> tuple:
@@ -811,26 +1111,30 @@ class Runner:
                          modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
                          compile_time=self.compile_time,
                          steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
-                         attitude=self.sim.attitude)
+                         attitude=self.sim.attitude, error_estimate=self.error_estimate())
 
 
-def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None) -> RunResult:
+def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None,
+        estimate: Optional[bool] = None) -> RunResult:
     """Run a scene in-process (no ROS) and return its time series at the scene's output rate.
 
     A scene with a ``controller`` runs its law (gyro_ctl) at every tick, and with ``sampling: events``
     also at the exact zeros of the law's switching functions between ticks. ``on_samples(dict)``, if
     given, is called with each new chunk of output rows (see :meth:`Runner.samples`). ``attitude``: None
     = the scene's ``output.attitude``, True = integrate it anyway (:func:`integrates_attitude`).
+    ``estimate``: False runs without the error control's shadow run (:class:`Runner`; the estimate is then the
+    step plan's model), e.g. to time the integrator alone at given knobs; None: with it where it can follow.
     """
     if scene.fidelity != "full":
         from .fidelity import run_hybrid
 
-        return run_hybrid(scene, duration)
+        return run_hybrid(scene, duration, estimate=estimate)
     ctl = scene.controller
     switching = ctl is not None and ctl.sampling == "events"
     # samples are breaks where a caller acts on them, and where switching events are looked for between
     # breaks (the node does the same: the same events, the same bits)
-    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching, attitude=attitude)
+    r = Runner(scene, duration, sample_breaks=on_samples is not None or switching, attitude=attitude,
+               estimate=estimate)
     drive(r, on_samples)
     return r.result()
 

@@ -67,6 +67,7 @@ class SlowK:
     tau1: float
     psi: bool = False  # the stators' commands come from the ψ-switching law
     dead_band: float = 0.0  # rad, its dead band
+    mu_max: float = MU_MAX  # the ``eps`` test's bound (the hybrid lowers it for a tight accuracy: fidelity.py)
 
     @property
     def kappa(self) -> float:
@@ -109,7 +110,7 @@ class SlowK:
         if not Ln > 0.0:
             return math.inf
         Lam = Ln / self.J
-        return (self._C / (self.J * Lam) + self._V / (Lam * Lam)) / MU_MAX
+        return (self._C / (self.J * Lam) + self._V / (Lam * Lam)) / self.mu_max
 
     @property
     def _C(self) -> float:

@@ -125,7 +125,7 @@ def test_bench_smoke(tmp_path):
                       steps_per_turn=(12, 48, 192), rate_changes=(1e-3, 1e-5, 1e-7), spt_ref=768,
                       rtols=(1e-4, 1e-7), rtol_ref=1e-10,
                       mode_horizon=0.05, rtf_duration=0.1, profile=False, min_wall=0.0, max_reps=1,
-                      averaged_scenes=("three_stators",))
+                      averaged_scenes=("three_stators",), accuracy=False)
     res = run_bench(cfg, tmp_path, command="smoke")
     _check_outputs(tmp_path, ["spinup_thin_shell"])
     assert res.refs[0]["agreement"] < 1e-8
@@ -173,3 +173,22 @@ def test_bench_ros_part_measures_the_node_path(tmp_path):
     assert rt["ok"] and 0 <= rt["median_ms"] <= rt["p99_ms"] <= rt["max_ms"] and rt["applied"] > 0
     md = "\n".join(bench_ros.markdown(type("R", (), {"ros": [{"part": "lockstep", **lk}, {"part": "realtime", **rt}]})()))
     assert "ROS path" in md and "ticks/s" in md
+
+
+def test_accuracy_part_smoke(tmp_path):
+    """The accuracy part (gyro_sim/bench_accuracy.py) on two short scenes: every row has an achieved error and an
+    estimate, the shipped scene meets its accuracy, the tables and accuracy.csv are written."""
+    from gyro_sim.bench_accuracy import accuracy_part
+
+    cfg = BenchConfig(mode="quick", only="accuracy", accuracy_scenes=("free_rotor", "nutation_oblate"))
+    res = run_bench(cfg, tmp_path, command="smoke")
+    rows = res.accuracy.rows
+    shipped = [r for r in rows if r.what == "as shipped" and r.fidelity == "full"]
+    assert len(shipped) == 2 and all(r.met for r in shipped)
+    assert all(r.L == r.L for r in rows if not r.note.startswith("refused"))
+    text = (tmp_path / "bench.md").read_text()
+    assert "Accuracy by default" in text and (tmp_path / "accuracy.csv").is_file()
+    for r in shipped:
+        print(f"\n  {r.scene}: achieved L {r.L:.1e}, attitude {r.q:.1e} (stated {r.rtol:g}, {r.attitude_tol:g}); "
+              f"estimate {r.est_L:.1e}, {r.est_q:.1e}")
+    assert accuracy_part is not None

@@ -182,7 +182,8 @@ def test_stiff_modes_do_not_shrink_the_step():
     (``method: auto`` picks ETDRK4 itself as soon as a mode is stiff at the lawson8 step, where frozen_flow
     does not apply or is dearer)."""
     base = {"rotor": {"inertia": [1e3] * 3, "conductor": SPHERE}, "duration": 0.05,
-            "integrator": {"method": "etdrk4"},
+            # (the knob given: a run's error control would otherwise change the step by the error it measures)
+            "integrator": {"method": "etdrk4", "steps_per_turn": 48},
             "stators": [{"name": "z3", "axis": [0, 0, 1], "coil_constant": 1e-3, "current": 1.0, "rate": 5000.0}],
             "output": {"rate": 100.0}}
     steps = {}

@@ -9,8 +9,14 @@ import gyro_sim
 from gyro_sim.fidelity import spinup_model
 
 
+#: the averaged models enter where their ε ≤ accuracy.rtol / fidelity.AVERAGED_ERROR (and ≤ MU_MAX = 1e-3): these
+#: tests of the models state an rtol that lets them in at MU_MAX (at the default rtol 1e-6 a run averages only
+#: where ε ≤ 2e-6)
+LOOSE = {"accuracy.rtol": 2e-3}
+
+
 def spinup(**over):
-    return gyro_sim.load_scene("spinup_thin_shell", overrides=over)
+    return gyro_sim.load_scene("spinup_thin_shell", overrides={**LOOSE, **over})
 
 
 def rel(a, b):
@@ -99,7 +105,7 @@ def test_auto_runs_m_averaged_model_and_hands_back():
     for name, tol in (("constant_field", {"L": 1e-4, "rho": 1e-4, "theta": 2e-3, "L_end": 1e-8}),
                       ("rotating_field", {"L": 1e-5, "rho": 1e-6, "theta": 1e-6, "L_end": 1e-5})):
         full = gyro_sim.run(gyro_sim.load_scene(name))
-        hy = gyro_sim.run(gyro_sim.load_scene(name, overrides={"fidelity": "auto"}))
+        hy = gyro_sim.run(gyro_sim.load_scene(name, overrides={**LOOSE, "fidelity": "auto"}))
         err = _slow_errors(full, hy)
         segs = hy.averaged_segments
         print(f"\n  {name}: averaged {[(round(a, 3), round(b, 3)) for a, b in segs]}; max errors "
@@ -109,16 +115,16 @@ def test_auto_runs_m_averaged_model_and_hands_back():
             assert err[k] < t, (name, k, err[k])
     # the rotating field's stretch runs to the end; the constant field's ends before the run (hand-back)
     assert segs[0][1] == pytest.approx(30.0)
-    hy = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={"fidelity": "auto"}))
+    hy = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={**LOOSE, "fidelity": "auto"}))
     assert hy.averaged_segments[0][1] < 60.0 and np.isfinite(hy.euler[-1, 0])
 
 
 def test_averaged_fidelity_takes_m_model_or_names_both_reasons():
-    r = gyro_sim.run(gyro_sim.load_scene("rotating_field", overrides={"fidelity": "averaged", "initial.spin": 3000.0}))
+    r = gyro_sim.run(gyro_sim.load_scene("rotating_field", overrides={**LOOSE, "fidelity": "averaged", "initial.spin": 3000.0}))
     assert r.averaged_segments and r.averaged_segments[0][0] <= 0.02
     with pytest.raises(gyro_sim.SceneError, match=r"fidelity = 'averaged'.*general field.*\[M\]'s averaged model: "
                                                   r"μ_eff = .* near resonance"):
-        gyro_sim.run(gyro_sim.load_scene("pulsating_field", overrides={"fidelity": "averaged"}))
+        gyro_sim.run(gyro_sim.load_scene("pulsating_field", overrides={**LOOSE, "fidelity": "averaged"}))
 
 
 def test_m_stretch_exit_between_samples_and_exact_torque():
@@ -126,8 +132,8 @@ def test_m_stretch_exit_between_samples_and_exact_torque():
     instant at 20 and at 0.2 samples per second), and its torque output is the averaged model's dL/dt."""
     from gyro_sim.averaged_m import averaged_m_model
 
-    dense = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={"fidelity": "auto"}))
-    sparse = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={"fidelity": "auto", "output.rate": 0.2}))
+    dense = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={**LOOSE, "fidelity": "auto"}))
+    sparse = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={**LOOSE, "fidelity": "auto", "output.rate": 0.2}))
     t_dense, t_sparse = dense.averaged_segments[0][1], sparse.averaged_segments[0][1]
     model = averaged_m_model(dense.scene)
     worst = 0.0

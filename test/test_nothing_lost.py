@@ -30,9 +30,24 @@ def _mcap(bag: Path) -> Path:
     return bag / f"{bag.name}.mcap"
 
 
+def long_scene(tmp_path: Path) -> str:
+    """spinup_thin_shell with a loose accuracy (rtol 1e-3, no attitude tolerance) as a file: a run of 10⁵ s at the
+    default accuracy (1e-6 rad of attitude over the run) would take hours (gyro_sim/accuracy.py warns), and these
+    tests want a long run that streams its bag at the old pace, to be stopped mid-run."""
+    import yaml
+
+    from gyro_sim.scene import builtin_scenes
+
+    data = yaml.safe_load(builtin_scenes()["spinup_thin_shell"].read_text())
+    data["accuracy"] = {"rtol": 1e-3, "attitude": None}
+    path = tmp_path / "spinup_thin_shell.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
 def _start_run(tmp_path: Path, bag: Path, duration: float = 100000.0) -> subprocess.Popen:
     """`gyro-sim run spinup_thin_shell --record BAG` in a process of its own, long enough to be stopped mid-run."""
-    return subprocess.Popen(GYRO_SIM + ["run", "spinup_thin_shell", "--duration", str(duration), "--record", str(bag),
+    return subprocess.Popen(GYRO_SIM + ["run", long_scene(tmp_path), "--duration", str(duration), "--record", str(bag),
                                         "--out", str(tmp_path / "runs"), "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
 
@@ -264,7 +279,7 @@ def test_full_disk_mid_run_closes_the_bag_with_what_fit(tmp_path):
     why = _unshare_ok()
     if why:
         pytest.skip(why)
-    p = _in_tmpfs(tmp_path, "20m", _cmd("run", "spinup_thin_shell", "--duration", "100000", "--record",
+    p = _in_tmpfs(tmp_path, "20m", _cmd("run", long_scene(tmp_path), "--duration", "100000", "--record",
                                          str(tmp_path / "disk" / "bag"), "--quiet", "--out", str(tmp_path / "runs")))
     assert p.returncode == 1, p.stderr
     lines = p.stderr.strip().splitlines()
@@ -289,7 +304,7 @@ def test_full_disk_in_the_simulator_node(tmp_path):
     from gyro_sim.testing import ros_env, unique_domain
 
     cmd = node_command("gyro_sim.ros.simulator_node", {
-        "scene": "spinup_thin_shell", "mode": "freerun", "duration": 100000.0, "expect_controller": "false",
+        "scene": long_scene(tmp_path), "mode": "freerun", "duration": 100000.0, "expect_controller": "false",
         "progress": "false", "record": str(tmp_path / "disk" / "bag")})
     p = _in_tmpfs(tmp_path, "20m", shlex.join(cmd), env=ros_env(unique_domain()))
     assert p.returncode == 1, p.stderr[-3000:]

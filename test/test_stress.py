@@ -10,6 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import gyro_sim
+from gyro_sim.scene import Accuracy
 from gyro_sim.conductor import conductor_model, g_solid_sphere
 from gyro_sim.scene import SceneError, scene_from_dict
 
@@ -137,7 +138,7 @@ def test_twenty_minute_spinup_full_against_auto():
     w = time.perf_counter()
     full = gyro_sim.run(s)
     w_full = time.perf_counter() - w
-    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto", "accuracy": Accuracy(rtol=2e-3)}))
     e = max(abs(hy.spin_rate[-1] / full.spin_rate[-1] - 1), abs(hy.theta[-1] / full.theta[-1] - 1))
     print(f"\n20-minute spin-up: full {w_full:.1f} s wall, {full.steps} steps; auto {hy.wall_time:.2f} s; "
           f"largest relative difference (spin, θ) {e:.1e}")
@@ -180,7 +181,7 @@ def three_stator_auto_against_full(r3, spin, theta, turn, I, nu, model, psi) -> 
             "control_current": I[0] * 0.2, "spin_current": I[2], "spin_rate": nu[2]}}
     s = scene_from_dict(d)
     full = gyro_sim.run(s)
-    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto"}))
+    hy = gyro_sim.run(s.model_copy(update={"fidelity": "auto", "accuracy": Accuracy(rtol=2e-3)}))
     assert np.all(np.isfinite(hy.L)) and np.all(np.isfinite(hy.q))
     eL = float(np.linalg.norm(hy.L[-1] - full.L[-1]) / np.linalg.norm(full.L[-1]))
     eth = abs(float(hy.theta[-1] - full.theta[-1]))

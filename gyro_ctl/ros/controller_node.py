@@ -301,7 +301,7 @@ def _expected_time_constant(scene, cfg) -> str:
     from ..laws import spinup_time_constant
 
     c = scene.rotor.conductor
-    k_e = conductor_model(c.kind, c.outer_radius, c.conductivity, thickness=c.thickness, n_modes=scene.modes).k_e
+    k_e = conductor_model(c.kind, c.outer_radius, c.conductivity, thickness=c.thickness).k_e  # (any N)
     st = scene.stators[scene.stator_index(cfg.params.stator)]
     return f", expected time constant {spinup_time_constant(scene.inertia[2], k_e, st.coil_constant, cfg.params.current):.4g} s"
 

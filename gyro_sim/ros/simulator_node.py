@@ -315,6 +315,8 @@ class Loop:
             self.recorder = BagRecorder(p["record"], scene_text(node.scene), node.scene.name,
                                         extra={"gyro_sim.mode": p["mode"],
                                                "gyro_sim.control_period": repr(p["control_period"]),
+                                               # the run's accuracy plan is made for it (gyro_sim.rerun)
+                                               "gyro_sim.planned_duration": repr(float(self.runner.T)),
                                                **(node.fault_config.as_custom() if node.fault_config.active else {})},
                                         static_tf=stator_frames(node.scene))
 
@@ -570,6 +572,8 @@ class Loop:
         self.last_cmd_wall = time.perf_counter()  # the watchdog counts from the resume
 
     def publish_samples(self, rows: slice) -> None:
+        if rows.stop <= rows.start:  # a break that is no sample (a command's instant, an error-control check)
+            return
         s = self.runner.samples(rows)
         self.node.publish_samples(s, self.names)
         if s["t"].size:
@@ -677,11 +681,13 @@ class Loop:
         wall = self.run_wall()
         compiled = compile_seconds() - self.c0
         lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
+        est = r.error_estimate()  # the run's estimated error so far (gyro_sim.accuracy)
         if self.recorder is not None:
             for k, v in (("wall_time", wall), ("compile_time", compiled), ("steps", r.sim.steps), ("duration", r.sim.t),
                          ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
                          ("latency_p99_s", float(np.percentile(lat, 99))), ("latency_max_s", float(np.max(lat)))):
                 self.recorder.set_custom(f"gyro_sim.{k}", v)
+            self.recorder.set_custom("gyro_sim.error_estimate", est.to_json())
             if status:
                 signum = getattr(self.stop, "signum", None)
                 self.recorder.interrupted(f"signal {signal_name(signum)}" if signum else "stopped")
@@ -693,6 +699,7 @@ class Loop:
                     f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
                     f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms max {np.max(lat) * 1e3:.3f} ms"
                     + (f" (+ {compiled:.1f} s compiling the kernels, first use)" if compiled else "")
+                    + f", estimated error {est.text()}"
                     + (" (interrupted)" if status else ""))
         return status  # 0 complete; 130 / 143 stopped by SIGINT / SIGTERM (the bag is closed)
 
