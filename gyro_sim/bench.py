@@ -1256,8 +1256,8 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
     from .scene import SceneError, load_scene
 
     args = build_parser().parse_args(argv)
-    try:
-        for s in args.scenes:
+    try:  # every scene named, before anything runs
+        for s in list(args.scenes) + list(args.accuracy_scenes or []):
             load_scene(s)
     except SceneError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -1267,12 +1267,6 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
     cfg.accuracy = not args.no_accuracy
     cfg.only = args.only
     if args.accuracy_scenes:
-        try:
-            for s in args.accuracy_scenes:
-                load_scene(s)
-        except SceneError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
         cfg.accuracy_scenes = tuple(args.accuracy_scenes)
     command = "gyro-sim bench " + " ".join(sys.argv[1:] if argv is None else list(argv))
     res = run_bench(cfg, args.out, command=command.strip())
