@@ -168,6 +168,7 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
     stop = StopEvent()
     restore = stop_on_signals(stop)  # first: a signal from here on ends the node cleanly
     node = None
+    status = None
     try:
         import rclpy
         from rclpy.exceptions import ParameterException
@@ -182,9 +183,13 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
             node = build()
         except (SceneError, ParameterException) as e:
             print(f"{who}: error: {e}", file=sys.stderr)
-            return 2
-        return loop(node, stop)
+            status = 2
+            return status
+        status = loop(node, stop)
+        return status
     finally:
+        if args is None:  # a process: its teardown is bounded (the bag is closed by now)
+            bound_teardown(who, status)
         try:
             if node is not None:
                 flush_publishers(node)
@@ -197,6 +202,35 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
                 ignore_signals()
             else:
                 restore()
+
+
+#: wall s a node process may take to tear down (flush its publishers, destroy the node, shut rclpy down) once its
+#: loop has ended and its bag is closed; beyond it the process exits with its status (bound_teardown)
+TEARDOWN_BUDGET = 20.0
+
+
+def bound_teardown(who: str, status: Optional[int], budget: Optional[float] = None) -> threading.Timer:
+    """Start a daemon timer that ends the process with ``status`` (1 if the loop did not return one) after
+    ``budget`` s (default :data:`TEARDOWN_BUDGET`) and says so on stderr: a DDS teardown that hangs (a node seen
+    alive 120 s after its ``done:`` line, its launcher killed, on a loaded CI machine) must not leave an orphan.
+    Everything the run owes (the bag, the done line) is written before the loop returns."""
+    import os
+    import sys
+
+    budget = TEARDOWN_BUDGET if budget is None else budget
+    code = 1 if status is None else int(status)
+
+    def _exit() -> None:
+        try:
+            sys.stderr.write(f"{who}: the ROS teardown took more than {budget:g} s; exiting with status {code}\n")
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
+
+    timer = threading.Timer(budget, _exit)
+    timer.daemon = True
+    timer.start()
+    return timer
 
 
 def wait_for_matches(node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0,
