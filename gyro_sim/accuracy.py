@@ -709,7 +709,7 @@ class ErrorControl:
         if method in SPT_MIN:
             div = SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]
         if method == "lawson8" and main.tau.size:  # the shadow's lawson8 step too within 2 τ_min (its order holds)
-            div = max(div, SHADOW_RATIO[method] * main._h_for("lawson8") / (2.0 * float(np.min(main.tau))))
+            div = max(div, SHADOW_RATIO[method] * main._h_for("lawson8") / (2.0 * main.tau_min))
         return div
 
     def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,

@@ -123,10 +123,9 @@ def reference(name: str, T: float) -> tuple[object, dict]:
         warnings.simplefilter("ignore")
         sim = Simulator(_load(name, T, **({"modes": n_ref} if n_ref else {})), attitude=True, quiet=True)
     om = sim.step_plan.turns * 2 * math.pi / T if T > 0 else 0.0
-    tau_min = float(np.min(sim.tau)) if sim.tau.size else math.inf
     spt_l8 = REF_SPT_LAWSON
-    if om > 0 and math.isfinite(tau_min):
-        spt_l8 = max(spt_l8, math.ceil(2 * math.pi / (om * 0.5 * tau_min)))
+    if om > 0 and math.isfinite(sim.tau_min):
+        spt_l8 = max(spt_l8, math.ceil(2 * math.pi / (om * 0.5 * sim.tau_min)))
     method, spt = ("lawson8", spt_l8) if spt_l8 <= 1024 else ("etdrk4", REF_SPT_ETD)
 
     def go(k):

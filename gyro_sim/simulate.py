@@ -273,6 +273,7 @@ class Simulator:
             if scene.torque_model == "none":
                 self.eff[effects.MAG] = 0.0
         self.tau, self.w, self.tail, self.c_m = tau, w, tail, c_m
+        self.tau_min = float(np.min(tau)) if tau.size else math.inf  # the fastest eddy mode's time constant, s
         self.lam = np.concatenate([np.zeros(7), np.repeat(-1.0 / tau, 3) if tau.size else np.zeros(0),
                                    np.zeros(self.n_extra)])
         # --- stators
@@ -409,19 +410,16 @@ class Simulator:
             self._check_knob(m)
             return m, self._frozen_flow_step()
         if m == "auto":
-            h = self._max_step(False, "lawson8")
-            t_min = float(np.min(self.tau)) if self.tau.size else math.inf
+            m, h = "lawson8", self._max_step(False, "lawson8")
             held = False
-            if h > 2.0 * t_min:
+            if h > 2.0 * self.tau_min:
                 # a mode is stiff at lawson8's step: ETDRK4 at its own step, or lawson8 held at τ_min (where its
-                # order holds, its shadow's step within 2 τ_min) where that costs less (LAWSON8_COST)
+                # order holds, its shadow's step within 2 τ_min) where that costs less (lawson8_cost)
                 h_etd = self._max_step(False, "etdrk4")
-                if t_min >= lawson8_cost(self.tau.size) * h_etd:
-                    h, held = t_min, True
+                if self.tau_min >= lawson8_cost(self.tau.size) * h_etd:
+                    h, held = self.tau_min, True
                 else:
                     m, h = "etdrk4", h_etd
-            if m == "auto":
-                m = "lawson8"
             if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0:
                 # decided at both steppers' settings for the scene's accuracy (the choice follows the physics
                 # and the tolerance; the scene's explicit knobs then set the chosen stepper's accuracy)
@@ -429,7 +427,7 @@ class Simulator:
                 h_ff = self._frozen_flow_step(ap.rate_change)
                 h_def = self._max_step(False, m, ap.steps_per_turn[m])
                 if held:
-                    h_def = min(h_def, t_min)
+                    h_def = min(h_def, self.tau_min)
                 if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h_def:
                     self._check_knob("frozen_flow")
                     return "frozen_flow", self._frozen_flow_step()
@@ -622,10 +620,8 @@ class Simulator:
         if method == "frozen_flow":
             return self._frozen_flow_step()
         h = self._max_step(False, method)
-        if method == "lawson8" and self.scene.integrator.method == "auto" and self.tau.size:
-            t_min = float(np.min(self.tau))
-            if h > 2.0 * t_min:
-                h = t_min
+        if method == "lawson8" and self.scene.integrator.method == "auto" and h > 2.0 * self.tau_min:
+            h = self.tau_min
         return h
 
     def replan(self) -> None:
@@ -938,7 +934,7 @@ class Runner:
             sh.advance(tb)
             self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
                                      exact=free and sim._free_axis != -1,
-                                     stiff=bool(sim.tau.size) and h > float(np.min(sim.tau)))
+                                     stiff=h > sim.tau_min)
             self._steps_seen = sim.steps
         else:
             return

@@ -188,12 +188,17 @@ def launch_stubs(monkeypatch):
     return types.SimpleNamespace(**{n.replace(".", "_"): m for n, m in mods.items()})
 
 
-def test_launch_file(launch_stubs):
-    s = launch_stubs
+def load_launch_file() -> types.ModuleType:
+    """launch/gyro_sim.launch.py as a module (with the ``launch_stubs`` fixture in place of launch/launch_ros)."""
     spec = importlib.util.spec_from_file_location("gyro_sim_launch", ROOT / "launch/gyro_sim.launch.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    ld = mod.generate_launch_description()
+    return mod
+
+
+def test_launch_file(launch_stubs):
+    s = launch_stubs
+    ld = load_launch_file().generate_launch_description()
     assert type(ld) is s.launch.LaunchDescription
     entities = list(ld.args[0])
     LC, Node = s.launch_substitutions.LaunchConfiguration, s.launch_ros_actions.Node

@@ -24,8 +24,8 @@ import psutil
 import pytest
 
 from gyro_sim.testing import ros_env, unique_domain
+from test_packaging import launch_stubs  # noqa: F401 (a fixture: launch / launch_ros stubbed)
 
-ROOT = Path(__file__).resolve().parents[1]
 START_TIMEOUT = 180.0  # wall s for the nodes to start and the run to begin (imports, discovery; a loaded machine)
 END_TIMEOUT = 120.0  # wall s for the processes to end after a signal (hang guard)
 LONG = ["--duration", "600", "--mode", "lockstep"]  # a run the signal lands in the middle of
@@ -377,25 +377,17 @@ def test_the_launcher_forwards_the_signal_and_kills_a_node_that_does_not_end(mon
 
 # --- the launch file (stub launch / launch_ros modules, as test_packaging.test_launch_file) ----------------
 
-def test_the_launch_file_gives_the_simulator_time_to_close_its_bag(monkeypatch):
-    from test_packaging import stub_module
+def test_the_launch_file_gives_the_simulator_time_to_close_its_bag(launch_stubs):
+    from test_packaging import load_launch_file
 
     from gyro_sim.ros.launch import STOP_GRACE
 
-    mods = {n: stub_module(n) for n in ("launch", "launch.actions", "launch.conditions", "launch.substitutions",
-                                        "launch_ros", "launch_ros.actions", "launch_ros.parameter_descriptions",
-                                        "launch_ros.substitutions")}
-    for n, m in mods.items():
-        monkeypatch.setitem(sys.modules, n, m)
-    spec = importlib.util.spec_from_file_location("gyro_sim_launch", ROOT / "launch/gyro_sim.launch.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    entities = list(mod.generate_launch_description().args[0])
-    sim, ctl = [e for e in entities if type(e) is mods["launch_ros.actions"].Node]
+    entities = list(load_launch_file().generate_launch_description().args[0])
+    sim, ctl = [e for e in entities if type(e) is launch_stubs.launch_ros_actions.Node]
     # ros2 launch: SIGINT (a terminal's, or its own), SIGTERM after sigterm_timeout, SIGKILL sigkill_timeout later
     grace = float(sim.kwargs["sigterm_timeout"]) + float(sim.kwargs["sigkill_timeout"])
     assert grace >= STOP_GRACE  # as long as gyro-sim run --ros waits
-    assert sim.kwargs["on_exit"] == mods["launch.actions"].Shutdown(reason="the simulator node ended")
+    assert sim.kwargs["on_exit"] == launch_stubs.launch_actions.Shutdown(reason="the simulator node ended")
     assert "on_exit" not in ctl.kwargs  # (the controller ending alone does not end the run)
 
 
