@@ -233,6 +233,8 @@ class Row:
     def setting(self) -> str:
         if self.knob == "rtol":
             return f"rtol={self.value:.0e}"
+        if self.knob == "steps":
+            return f"steps={int(self.value)}"
         return f"{self.knob}={self.value:g}"
 
 

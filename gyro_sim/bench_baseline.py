@@ -209,7 +209,9 @@ def rk4_sweep(scene_name: str, horizon: float, L_ref: np.ndarray, q_ref: np.ndar
               steps: Sequence[int] = RK4_STEPS, min_wall: float = 0.0, max_reps: int = 1,
               label: Optional[str] = None, say=None) -> tuple[list, list]:
     """The compiled RK4's work-precision curve: a run at each of ``steps`` (increasing), scored against the
-    reference (``Row.score``: the benchmark's error measure), until the error is below :data:`RK4_FLOOR`.
+    reference (``Row.score``: the benchmark's error measure), until the error is below :data:`RK4_FLOOR` or has
+    fallen by less than 2 over the last two doublings (a 4th-order method gains 256 there: the floor is the
+    reference's own error or round-off).
 
     Returns (rows, notes). A run whose step is beyond RK4's stability (its state overflows: the error is not
     finite) is left out of the rows and said in the notes. The scene's path (its ``Simulator``, the compiled
@@ -231,7 +233,8 @@ def rk4_sweep(scene_name: str, horizon: float, L_ref: np.ndarray, q_ref: np.ndar
         rows.append(r)
         if say is not None:
             say(r)
-        if r.error < RK4_FLOOR:
+        if r.error < RK4_FLOOR or (len(rows) >= 3 and rows[-3].error < 2.0 * r.error
+                                   and rows[-3].steps * 4 == r.steps):
             break
     notes = [f"{label or scene_name} ({horizon:g} s): {RK4_METHOD} unstable (state overflows) at "
              f"{', '.join(map(str, unstable))} steps; not listed"] if unstable else []
