@@ -213,8 +213,8 @@ def rk4_sweep(scene_name: str, horizon: float, L_ref: np.ndarray, q_ref: np.ndar
     fallen by less than 2 over the last two doublings (a 4th-order method gains 256 there: the floor is the
     reference's own error or round-off).
 
-    Returns (rows, notes). A run whose step is beyond RK4's stability (its state overflows: the error is not
-    finite) is left out of the rows and said in the notes. The scene's path (its ``Simulator``, the compiled
+    Returns (rows, notes). A run whose error is above 1 or not finite (its step beyond RK4's stability: the state
+    overflows) is left out of the rows and said in the notes. The scene's path (its ``Simulator``, the compiled
     functions) is run once before the first timed run.
     """
     scene = _load(scene_name, extra)
@@ -227,17 +227,17 @@ def rk4_sweep(scene_name: str, horizon: float, L_ref: np.ndarray, q_ref: np.ndar
         with np.errstate(all="ignore"):  # an unstable step overflows
             r = run_rk4(scene_name, horizon, n, extra, min_wall, max_reps, label)
             r.score(L_ref, q_ref)
-        if not math.isfinite(r.error):
+        if not (r.error <= 1.0):  # overflowed (beyond RK4's stability) or 100 % off: no point of a curve
             unstable.append(n)
             continue
         rows.append(r)
         if say is not None:
             say(r)
-        if r.error < RK4_FLOOR or (len(rows) >= 3 and rows[-3].error < 2.0 * r.error
-                                   and rows[-3].steps * 4 == r.steps):
+        if r.error < RK4_FLOOR or (len(rows) >= 3 and rows[-3].steps * 4 == r.steps
+                                   and max(x.error for x in rows[-3:]) < 1e-2 and rows[-3].error < 2.0 * r.error):
             break
-    notes = [f"{label or scene_name} ({horizon:g} s): {RK4_METHOD} unstable (state overflows) at "
-             f"{', '.join(map(str, unstable))} steps; not listed"] if unstable else []
+    notes = [f"{label or scene_name} ({horizon:g} s): {RK4_METHOD} at {', '.join(map(str, unstable))} steps: error "
+             "above 1 or not finite (beyond RK4's stability, or the motion not resolved); not listed"] if unstable else []
     return rows, notes
 
 
