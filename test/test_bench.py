@@ -132,7 +132,7 @@ def test_savings_rows_are_timed_after_warm_up():
         assert math.isfinite(v["ratio"]) and v["ratio"] > 0
         assert v["compile"] == 0 and v["compile_forced"] == 0
     att = next(v for v in res.savings if v["what"].startswith("attitude"))
-    assert att["method"] == att["method_forced"] == "frozen_flow" and att["steps"] == att["steps_forced"]
+    assert att["method"] == att["method_forced"] == "frozen_flow"
 
 
 def test_final_error_is_sign_invariant_in_q():
