@@ -8,6 +8,9 @@ process and on the same scenes,
 * the baseline a user would write: :func:`scipy.integrate.solve_ivp` (DOP853 and LSODA) over a
   NumPy right-hand side of the same model (:func:`numpy_rhs`), sweeping rtol 1e-3 … 1e-10 with
   atol = rtol × the scale of each state component;
+* the compiled baseline: classic fixed-step RK4 over a numba right-hand side of that model
+  (:mod:`gyro_sim.bench_baseline`), sweeping the number of steps;
+* the default scene's quasi-static variant (``torque_model: quasi_static``) beside it (``BenchConfig.variants``);
 
 and measures CPU and wall time, steps, right-hand-side evaluations and the error of the final state
 against a converged reference (our integrator at a high steps_per_turn, cross-checked against
@@ -1376,7 +1379,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gyro-sim bench",
         description="Work-precision benchmark: gyro_sim's integrator (every fidelity level) against "
-                    "scipy solve_ivp (DOP853, LSODA) on the same scenes; writes DIR/bench.md, bench.csv, "
+                    "scipy solve_ivp (DOP853, LSODA) and a compiled fixed-step RK4 on the same scenes; writes "
+                    "DIR/bench.md, bench.csv, "
                     "work_precision.png and prints the headline ratios.")
     p.add_argument("--quick", action="store_true", help="short horizons, under a minute")
     p.add_argument("--out", metavar="DIR", type=Path, default=Path("runs/bench"),
