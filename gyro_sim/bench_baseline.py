@@ -169,8 +169,9 @@ def model_args(sim) -> tuple:
 
 def rk4_once(scene, horizon: float, steps: int):
     """The scene (controller removed by the caller) over ``horizon`` s with ``steps`` RK4 steps in all, split
-    between its command segments in proportion to their length (at least one each). Returns (Simulator at
-    the end, steps taken, RHS evaluations). q is normalised at each command instant and at the end."""
+    between its command segments in proportion to their length (at least one each). Returns (the Simulator at
+    the end, RHS evaluations, steps taken): ``bench.drive_segments``, which normalises q at each command instant
+    and at the end."""
     from .bench import drive_segments
 
     def advance(sim, t_next):
@@ -195,11 +196,10 @@ def run_rk4(scene_name: str, horizon: float, steps: int, extra: Optional[dict] =
             max_reps: int = 1, label: Optional[str] = None):
     """One timed run of the compiled RK4 baseline (``bench.Row``; knob ``steps`` over the horizon), after
     :func:`warm`; timed like the other methods (``bench._timed``: least CPU of the repeats)."""
-    from .bench import Row, _scene_overrides, _timed
-    from .scene import load_scene
+    from .bench import Row, _timed
 
     warm()
-    scene = load_scene(scene_name, overrides=_scene_overrides("full", extra))
+    scene = _load(scene_name, extra)
     wall, cpu, (sim, nfev, n) = _timed(lambda: rk4_once(scene, horizon, steps), min_wall, max_reps)
     return Row(label or scene_name, horizon, RK4_METHOD, "steps", float(n), wall, n, nfev,
                L=sim.y[0:3].copy(), q=sim.y[3:7].copy(), cpu=cpu)
@@ -242,6 +242,7 @@ def rk4_sweep(scene_name: str, horizon: float, L_ref: np.ndarray, q_ref: np.ndar
 
 
 def _load(scene_name: str, extra: Optional[dict]):
+    """The scene with ``extra`` overrides and no controller (as every work-precision method runs it)."""
     from .bench import _scene_overrides
     from .scene import load_scene
 
