@@ -8,6 +8,9 @@ process and on the same scenes,
 * the baseline a user would write: :func:`scipy.integrate.solve_ivp` (DOP853 and LSODA) over a
   NumPy right-hand side of the same model (:func:`numpy_rhs`), sweeping rtol 1e-3 … 1e-10 with
   atol = rtol × the scale of each state component;
+* the compiled baseline: classic fixed-step RK4 over a numba right-hand side of that model
+  (:mod:`gyro_sim.bench_baseline`), sweeping the number of steps;
+* the default scene's quasi-static variant (``torque_model: quasi_static``) beside it (``BenchConfig.variants``);
 
 and measures CPU and wall time, steps, right-hand-side evaluations and the error of the final state
 against a converged reference (our integrator at a high steps_per_turn, cross-checked against
@@ -81,6 +84,22 @@ def refined(method: str, value: float) -> float:
     """The knob's value that halves the step."""
     return value / 2 if knob_of(method) == "rate_change" else 2 * value
 BASELINES = ("DOP853", "LSODA")
+#: the compiled baseline's method label (classic RK4, fixed step, numba right-hand side: gyro_sim/bench_baseline.py)
+RK4_METHOD = "numba RK4"
+
+
+def is_baseline(method: str) -> bool:
+    """Whether a method label is one of the baselines (solve_ivp or the compiled RK4), not ours."""
+    return method.startswith("solve_ivp") or method == RK4_METHOD
+
+
+def _faster(ratio: float) -> str:
+    """'2025x faster than' for a cost ratio (theirs / ours) ≥ 1, '3.2x slower than' below 1."""
+    if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0):
+        return "– against"
+    if ratio >= 1:
+        return f"{ratio:.0f}x faster than" if ratio >= 100 else f"{ratio:.3g}x faster than"
+    return f"{1 / ratio:.3g}x slower than"
 
 
 # ----------------------------------------------------------------------------------------
@@ -217,6 +236,8 @@ class Row:
     def setting(self) -> str:
         if self.knob == "rtol":
             return f"rtol={self.value:.0e}"
+        if self.knob == "steps":
+            return f"steps={int(self.value)}"
         return f"{self.knob}={self.value:g}"
 
 
@@ -259,6 +280,22 @@ def _timed(fn: Callable, min_wall: float = 0.0, max_reps: int = 1):
         total, reps = total + w, reps + 1
         if reps >= max_reps or total >= min_wall:
             return best[0], best[1], out
+
+
+def _timed_warm(fn: Callable, min_wall: float = 0.0, max_reps: int = 1):
+    """fn() once untimed, then :func:`_timed`: a path's first call compiles its numba kernels or loads them from
+    numba's cache (neither of which its cost should count; a cache load is not a compile event), and a first
+    repeat longer than ``min_wall`` would be the only one.
+
+    Returns (wall s, CPU s, result, s compiling during the timed repeats: 0 when the warm-up did its job).
+    """
+    from .compile_watch import compile_seconds
+
+    compile_seconds()  # installs numba's compile listener before the warm-up
+    fn()
+    c0 = compile_seconds()
+    wall, cpu, out = _timed(fn, min_wall, max_reps)
+    return wall, cpu, out, compile_seconds() - c0
 
 
 def _scene_overrides(level: str, extra: Optional[dict]) -> dict:
@@ -338,10 +375,30 @@ def run_baseline(scene_name: str, horizon: float, method: str, rtol: float, L_sc
 def _baseline_once(scene, horizon: float, method: str, rtol: float, L_scale: float):
     from scipy.integrate import solve_ivp
 
+    atol: list = []  # of the state at t = 0, for every segment
+
+    def advance(sim, t_next):
+        if not atol:
+            atol.append(rtol * state_scale(sim, L_scale))
+        sol = solve_ivp(numpy_rhs(sim), (sim.t, t_next), sim.y.copy(), method=method, rtol=rtol, atol=atol[0])
+        if sol.status != 0:
+            raise RuntimeError(f"solve_ivp {method} rtol={rtol:g}: {sol.message}")
+        return sol.y[:, -1].copy(), int(sol.nfev), int(sol.t.size - 1)
+
+    return drive_segments(scene, horizon, advance)
+
+
+def drive_segments(scene, horizon: float, advance: Callable):
+    """A baseline's run of ``scene`` over ``horizon`` s, segment by segment between its scheduled commands.
+
+    ``advance(sim, t_next) -> (y at t_next, RHS evaluations, steps)`` integrates the present segment (field of
+    ``sim.phasors()``, referred to s = t − sim.t) from ``sim.t``; q is normalised at each command instant, the
+    field phase carried on, and the commands applied there (field steps as in the simulator). Returns (the
+    ``Simulator`` at ``horizon``, RHS evaluations, steps).
+    """
     from .simulate import Simulator
 
     sim = Simulator(scene)
-    atol = rtol * state_scale(sim, L_scale)
     cmds = sorted((c for c in scene.commands if c.time < horizon), key=lambda c: c.time)
     ci = 0
 
@@ -356,16 +413,13 @@ def _baseline_once(scene, horizon: float, method: str, rtol: float, L_scale: flo
     stops = sorted({c.time for c in cmds if 0.0 < c.time < horizon} | {horizon})
     nfev = steps = 0
     for t_next in stops:
-        sol = solve_ivp(numpy_rhs(sim), (sim.t, t_next), sim.y.copy(), method=method, rtol=rtol, atol=atol)
-        if sol.status != 0:
-            raise RuntimeError(f"solve_ivp {method} rtol={rtol:g}: {sol.message}")
-        y = sol.y[:, -1].copy()
+        y, f, n = advance(sim, t_next)
         y[3:7] /= np.linalg.norm(y[3:7])
         sim.y[:] = y
         sim.phase = np.mod(sim.phase + sim.rate * (t_next - sim.t), 2 * math.pi)
         sim.t = t_next
-        nfev += int(sol.nfev)
-        steps += int(sol.t.size - 1)
+        nfev += f
+        steps += n
         apply_due(t_next)
     return sim, nfev, steps
 
@@ -425,6 +479,10 @@ class BenchConfig:
     rtols: tuple = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
     rtol_ref: float = 1e-12
     baselines: tuple = BASELINES
+    compiled_baseline: bool = True  # the compiled fixed-step RK4 (bench_baseline.py) beside the solve_ivp baselines
+    rk4_steps: Optional[tuple] = None  # its sweep of step counts over the horizon (None: bench_baseline.RK4_STEPS)
+    # work-precision variants of the scenes (run where the scene is in ``scenes``): (scene, overrides)
+    variants: tuple = (("spinup_thin_shell", {"torque_model": "quasi_static"}),)
     long_horizon_scenes: tuple = ()  # our integrator only, over the scene's whole duration
     long_spt_ref: int = 1536
     mode_scene: Optional[str] = "spinup_solid_sphere"
@@ -497,20 +555,28 @@ def _line(r: Row) -> str:
             f"error {r.error:.2e}")
 
 
+def variant_label(scene: str, extra: Optional[dict] = None) -> str:
+    """The name of a scene with overrides in the tables: ``spinup_thin_shell [torque_model: quasi_static]``."""
+    return f"{scene} [{', '.join(f'{k}: {v}' for k, v in extra.items())}]" if extra else scene
+
+
 def work_precision(res: Results, scene: str, horizon: float, with_baselines: bool = True,
-                   spt_ref: Optional[int] = None) -> None:
-    """Every method on one scene and horizon against one converged reference; fills res.rows."""
+                   spt_ref: Optional[int] = None, extra: Optional[dict] = None) -> None:
+    """Every method on one scene (with ``extra`` overrides: a variant, named by :func:`variant_label`) and horizon
+    against one converged reference; fills res.rows. The baselines: solve_ivp (``cfg.baselines``) and, with
+    ``cfg.compiled_baseline``, the compiled fixed-step RK4 (gyro_sim/bench_baseline.py)."""
     cfg = res.config
     spt_ref = spt_ref or cfg.spt_ref
-    _say(f"[{scene}, {horizon:g} s] reference: {OURS} full/lawson8, steps_per_turn={spt_ref}")
-    ref = run_ours(scene, horizon, spt_ref, "full/lawson8")
+    label = variant_label(scene, extra)
+    _say(f"[{label}, {horizon:g} s] reference: {OURS} full/lawson8, steps_per_turn={spt_ref}")
+    ref = run_ours(scene, horizon, spt_ref, "full/lawson8", extra)
     ref.note = "reference"
     L_ref, q_ref = ref.L, ref.q
     L_scale = float(np.linalg.norm(L_ref)) or 1.0
-    ref_info = {"scene": scene, "horizon": horizon, "reference": f"{OURS} full/lawson8, steps_per_turn={spt_ref}",
+    ref_info = {"scene": label, "horizon": horizon, "reference": f"{OURS} full/lawson8, steps_per_turn={spt_ref}",
                 "check": "", "agreement": float("nan"), "ref_cpu": ref.cpu, "check_cpu": float("nan")}
     if with_baselines and cfg.rtol_ref:
-        chk = run_baseline(scene, horizon, "DOP853", cfg.rtol_ref, L_scale)
+        chk = run_baseline(scene, horizon, "DOP853", cfg.rtol_ref, L_scale, extra)
         ref_info.update(check=f"solve_ivp DOP853 rtol={cfg.rtol_ref:.0e}",
                         agreement=final_error(chk.L, chk.q, L_ref, q_ref), check_cpu=chk.cpu)
         _say(f"    cross-check DOP853 rtol={cfg.rtol_ref:.0e}: agreement {ref_info['agreement']:.2e}")
@@ -518,16 +584,16 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
     rows: list[Row] = []
     for level in ours_levels():
         try:
-            method = level_method(scene, level)
+            method = level_method(scene, level, extra)
         except Exception as exc:  # a level that does not apply to this scene
-            res.notes.append(f"{scene}: {_method_label(level)} skipped: {exc}".splitlines()[0])
+            res.notes.append(f"{label}: {_method_label(level)} skipped: {exc}".splitlines()[0])
             _say(f"    {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
             continue
         for value in (cfg.rate_changes if knob_of(method) == "rate_change" else cfg.steps_per_turn):
             try:
-                r = run_ours(scene, horizon, value, level, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
+                r = run_ours(scene, horizon, value, level, extra, min_wall=cfg.min_wall, max_reps=cfg.max_reps)
             except Exception as exc:  # a level that does not apply to this scene
-                res.notes.append(f"{scene}: {_method_label(level)} skipped: {exc}".splitlines()[0])
+                res.notes.append(f"{label}: {_method_label(level)} skipped: {exc}".splitlines()[0])
                 _say(f"    {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
                 break
             r.score(L_ref, q_ref)
@@ -536,12 +602,20 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
     if with_baselines:
         for method in cfg.baselines:
             for rtol in cfg.rtols:
-                r = run_baseline(scene, horizon, method, rtol, L_scale, min_wall=cfg.min_wall,
+                r = run_baseline(scene, horizon, method, rtol, L_scale, extra, min_wall=cfg.min_wall,
                                  max_reps=cfg.max_reps)
                 r.score(L_ref, q_ref)
                 rows.append(r)
                 _say(_line(r))
+        if cfg.compiled_baseline:
+            from .bench_baseline import RK4_STEPS, rk4_sweep
+
+            rk4_rows, notes = rk4_sweep(scene, horizon, L_ref, q_ref, extra, cfg.rk4_steps or RK4_STEPS,
+                                        cfg.min_wall, cfg.max_reps, label, say=lambda r: _say(_line(r)))
+            rows.extend(rk4_rows)
+            res.notes.extend(notes)
     for r in rows:
+        r.scene = label
         if not with_baselines:
             r.note = "our integrator only (whole scene)" + ("; " + r.note if r.note else "")
         if r.method.startswith(OURS) and r.method != _method_label("full") and r.averaged == 0:
@@ -559,7 +633,7 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
 
     for m, (cc, cr, cw) in costs.items():
         Lrows = [replace(r, error=r.error_L) for r in by_method[m]]
-        res.headline.append({"scene": scene, "horizon": horizon, "method": m, "cpu": cc, "wall": cw, "rhs": cr,
+        res.headline.append({"scene": label, "horizon": horizon, "method": m, "cpu": cc, "wall": cw, "rhs": cr,
                              "flat": below_target(by_method[m]), "whole": not with_baselines,
                              "cpu_L": cost_at_error(Lrows, TARGET_ERROR, "cpu"),
                              "best": min((r.error for r in by_method[m]), default=float("nan")),
@@ -742,14 +816,19 @@ SAVINGS = (
     ("attitude of an isotropic rotor nobody reads", {"rotor.inertia": [5.592e-6] * 3, "output.attitude": False},
      {"output.attitude": True},
      "inertia [J, J, J]: output.attitude false (L and the eddy modes in the case frame, no q) against true "
-     "(the same frozen_flow steps)"),
+     "(frozen_flow both; without attitude the accuracy plan is for L alone, so the step counts may differ)"),
 )
 
 
 def savings(res: Results) -> None:
     """What skipping each unneeded piece is worth: the default scene (no controller, the comparison horizon)
     with the saving and with the work it skips forced in, CPU time of each (least of the repeats), and the
-    cost of the Euler angles a run computes only when they are read."""
+    cost of the Euler angles a run computes only when they are read.
+
+    Every path is run once before it is timed (:func:`_timed_warm`; the attitude-free frozen-flow step of the
+    ``output.attitude: false`` row is compiled or loaded from numba's cache on its first call, which read as a
+    0.00x saving when it was timed); each row keeps the seconds numba compiled during its timed runs
+    (``compile``, ``compile_forced``: 0)."""
     from .scene import load_scene
     from .simulate import Simulator, run
 
@@ -760,20 +839,22 @@ def savings(res: Results) -> None:
         rows = []
         for ov in (base, {**base, **forced}):
             sc = load_scene("spinup_thin_shell", overrides=ov)
-            w, c, r = _timed(lambda: run(sc, duration=T), cfg.min_wall, cfg.max_reps)
-            rows.append((c, int(r.steps), Simulator(sc)._method()))
-        (c0, n0, m0), (c1, n1, m1) = rows
+            w, c, r, comp = _timed_warm(lambda: run(sc, duration=T), cfg.min_wall, cfg.max_reps)
+            rows.append((c, int(r.steps), Simulator(sc)._method(), comp))
+        (c0, n0, m0, k0), (c1, n1, m1, k1) = rows
         res.savings.append({"what": what, "how": how, "horizon": T, "cpu": c0, "cpu_forced": c1, "steps": n0,
-                            "steps_forced": n1, "method": m0, "method_forced": m1, "ratio": c1 / c0})
+                            "steps_forced": n1, "method": m0, "method_forced": m1, "ratio": c1 / c0,
+                            "compile": k0, "compile_forced": k1})
         _say(f"[savings] {what}: {c0 * 1e3:.2f} ms ({m0}, {n0} steps) against {c1 * 1e3:.2f} ms ({m1}, {n1} steps) "
              f"= {c1 / c0:.2f}x ({how})")
     sc = load_scene("spinup_thin_shell", overrides={"controller": None, "duration": 60.0})
-    _, c_run, r = _timed(lambda: run(sc), cfg.min_wall, cfg.max_reps)
-    _, c_eul, _ = _timed(lambda: replace(r, _euler=None).euler, cfg.min_wall, cfg.max_reps)
+    _, c_run, r, k0 = _timed_warm(lambda: run(sc), cfg.min_wall, cfg.max_reps)
+    _, c_eul, _, k1 = _timed_warm(lambda: replace(r, _euler=None).euler, cfg.min_wall, cfg.max_reps)
     res.savings.append({"what": "Euler angles nobody reads", "how": "RunResult.euler computed on first access "
                         f"(60 s, {r.t.size} samples) against the run itself", "horizon": 60.0, "cpu": c_run,
                         "cpu_forced": c_run + c_eul, "steps": int(r.steps), "steps_forced": int(r.steps),
-                        "method": "", "method_forced": "", "ratio": (c_run + c_eul) / c_run})
+                        "method": "", "method_forced": "", "ratio": (c_run + c_eul) / c_run,
+                        "compile": k0, "compile_forced": k1})
     _say(f"[savings] Euler angles: {c_eul * 1e3:.2f} ms on first access against {c_run * 1e3:.2f} ms for the run")
 
 
@@ -817,11 +898,13 @@ def profile_kernels(res: Results) -> None:
         integ()
         t_step = min(_once(integ) for _ in range(3)) / k
         t_ff = _frozen_flow_step_cost(sim, Bre, Bim, om)
+        t_rk4 = _rk4_step_cost(sim)
         f = numpy_rhs(sim)
         m = 2000
         t_np = min(_once(lambda: [f(1e-3, y) for _ in range(m)]) for _ in range(3)) / m
         for what, sec in (("RHS, compiled (nonlinear_part_at)", t_rhs), ("field B, dB/dt (field_case)", t_field),
                           ("ETDRK4 step (integrate_etd)", t_step), ("frozen_flow step (integrate_frozen)", t_ff),
+                          ("RK4 step, compiled baseline (bench_baseline.rk4_span, 4 RHS)", t_rk4),
                           ("RHS, NumPy baseline", t_np)):
             if math.isfinite(sec):
                 res.profile.append({"case": label, "what": what, "ns": sec * 1e9})
@@ -829,6 +912,7 @@ def profile_kernels(res: Results) -> None:
                             "unit": "ratio"})
         _say(f"[profile] {label}: RHS {t_rhs * 1e9:.0f} ns, field {t_field * 1e9:.0f} ns, "
              f"step {t_step * 1e9:.0f} ns ({t_step / t_rhs:.2f} RHS), frozen_flow step {t_ff * 1e9:.0f} ns, "
+             f"compiled baseline's RK4 step {t_rk4 * 1e9:.0f} ns, "
              f"NumPy RHS {t_np * 1e9:.0f} ns")
     # Python cost of one call of Simulator.advance (tiny span: one step)
     sim = Simulator(load_scene("spinup_thin_shell", overrides={"controller": None}))
@@ -862,6 +946,20 @@ def _frozen_flow_step_cost(sim, Bre, Bim, om) -> float:
 
     integ()
     return min(_once(integ) for _ in range(3)) / k
+
+
+def _rk4_step_cost(sim) -> float:
+    """CPU seconds per step of the compiled baseline's RK4 (``bench_baseline.rk4_span``, 4 right-hand sides) over
+    100 000 steps of 0.1 µs from the scene's initial state (NaN where it has effects the baseline lacks)."""
+    from . import effects
+    from .bench_baseline import model_args, rk4_span, warm
+
+    if sim.eff[effects.ON] != 0.0:
+        return float("nan")
+    warm()
+    args = model_args(sim)
+    k = 100_000
+    return min(_once(lambda: rk4_span(sim.y.copy(), 1e-7, k, *args)) for _ in range(3)) / k
 
 
 _LOOPS: list = []
@@ -920,6 +1018,9 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         return res
     for scene in cfg.scenes:
         work_precision(res, scene, cfg.horizon_of(scene))
+        for base, extra in cfg.variants:
+            if base == scene:
+                work_precision(res, scene, cfg.horizon_of(scene), extra=dict(extra))
     for scene in cfg.long_horizon_scenes:
         from .scene import load_scene
 
@@ -967,16 +1068,17 @@ def headline_lines(res: Results) -> list[str]:
     Costs are CPU seconds of this process (``time.process_time``); the wall-clock ratio follows in
     brackets. Both come from the same runs.
     """
-    lines = []
+    lines = both_ratios_lines(res)
     full = _method_label("full")
     for h in res.headline:
-        if h["method"].startswith("solve_ivp"):
-            flat = (f"; every {h['method']} setting is below {TARGET_ERROR:.0e}, its step being set by "
-                    "stability: its cheapest run") if h.get("flat") else ""
+        if is_baseline(h["method"]):
+            flat = (f"; every {h['method']} setting is below {TARGET_ERROR:.0e}: its cheapest run"
+                    + (", its step being set by stability" if h["method"].startswith("solve_ivp") else "")
+                    ) if h.get("flat") else ""
             ours = _ours(res, h)
             lines.append(f"{h['scene']} ({h['horizon']:g} s): at error {TARGET_ERROR:.0e}, {full} is "
-                         f"{_fmt(h['speedup'], '.0f')}x faster than {h['method']} (CPU {_fmt(ours.get('cpu'), '.3g')} s "
-                         f"vs {_fmt(h['cpu'], '.3g')} s; wall-clock ratio {_fmt(h['speedup_wall'], '.0f')}x); "
+                         f"{_faster(h['speedup'])} {h['method']} (CPU {_fmt(ours.get('cpu'), '.3g')} s "
+                         f"vs {_fmt(h['cpu'], '.3g')} s; wall-clock ratio {_fmt(h['speedup_wall'], '.3g')}x); "
                          f"{h['method']} makes {_fmt(h['rhs_ratio'], '.2f')}x our RHS evaluations{flat}")
         elif h.get("whole"):
             reach = (f"costs {_fmt(h['cpu'], '.3g')} CPU s, {_fmt(h['horizon'] / h['cpu'], '.3g')} simulated s "
@@ -1018,6 +1120,35 @@ def headline_lines(res: Results) -> list[str]:
     from .bench_ros import headline as ros_headline
 
     return lines + ros_headline(res)
+
+
+def speedup_table(res: Results) -> list[dict]:
+    """Per compared scene and horizon: our cost at the target error and each baseline's ratio to it.
+
+    Dicts: scene, horizon, ours (CPU s of ``gyro_sim full``), and per baseline method its CPU s (``cost``) and
+    the ratio theirs / ours (``ratio``; > 1: ours is faster) under ``baselines``."""
+    out = []
+    for h in res.headline:
+        if h["method"] != _method_label("full") or h.get("whole"):
+            continue
+        bl = {x["method"]: {"cost": x["cpu"], "ratio": x["speedup"], "flat": x.get("flat")}
+              for x in res.headline if x["scene"] == h["scene"] and x["horizon"] == h["horizon"]
+              and is_baseline(x["method"])}
+        if bl:
+            out.append({"scene": h["scene"], "horizon": h["horizon"], "ours": h["cpu"], "baselines": bl})
+    return out
+
+
+def both_ratios_lines(res: Results) -> list[str]:
+    """One line per compared scene: our cost at the target error against SciPy's DOP853 and the compiled RK4."""
+    lines = []
+    for t in speedup_table(res):
+        parts = [f"{_faster(v['ratio'])} {m} ({_fmt(v['cost'], '.3g')} s)" for m, v in t["baselines"].items()
+                 if m in (f"solve_ivp {BASELINES[0]}", RK4_METHOD)]
+        if parts:
+            lines.append(f"{t['scene']} ({t['horizon']:g} s): at error {TARGET_ERROR:.0e} {_method_label('full')} "
+                         f"costs {_fmt(t['ours'], '.3g')} CPU s: " + " and ".join(parts))
+    return lines
 
 
 def _ours(res: Results, h: dict) -> dict:
@@ -1100,6 +1231,19 @@ def markdown(res: Results) -> str:
          "real-time factor = simulated s / wall s. Comparisons run each scene without its controller (the same "
          "problem for every method).", "", "## Headline", ""]
     L += [f"- {x}" for x in headline_lines(res)] or ["- (no comparison ran)"]
+    sp = speedup_table(res)
+    if sp:
+        names = list(dict.fromkeys(m for t in sp for m in t["baselines"]))
+        L += [""] + _table(
+            f"## Speed-up at error {TARGET_ERROR:.0e} (CPU; the baseline's cost over ours, > 1: ours is faster)",
+            f"scene | horizon s | {_method_label('full')} CPU s | " + " | ".join(f"vs {m}" for m in names),
+            [f"{t['scene']} | {t['horizon']:g} | {_fmt(t['ours'])} | " + " | ".join(
+                f"{_fmt(t['baselines'][m]['ratio'], '.3g')}x ({_fmt(t['baselines'][m]['cost'])} s"
+                + (", cheapest run" if t['baselines'][m]['flat'] else "") + ")" if m in t["baselines"] else "–"
+                for m in names) for t in sp],
+            [f"{RK4_METHOD}: classic RK4 with a fixed step on a numba right-hand side of the same model "
+             "(gyro_sim/bench_baseline.py), swept over the number of steps; solve_ivp: SciPy over the NumPy "
+             "right-hand side. Costs interpolated log-log on each method's Pareto front."])[:-1]
     L += ["", "## References", "",
           "| scene | horizon s | reference | CPU s | cross-check | CPU s | agreement |", "|---|---|---|---|---|---|---|"]
     for r in res.refs:
@@ -1204,7 +1348,7 @@ def plot_work_precision(res: Results, path: Path) -> None:
     fig = Figure(figsize=(6.0 * n, 4.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, n, squeeze=False)[0]
-    markers = ["o", "s", "^", "D", "v", "P", "X"]
+    markers = ["o", "s", "^", "D", "v", "P", "X", "*", "h"]
     for ax, ((scene, T), rows) in zip(axes, groups.items()):
         methods: dict = {}
         for r in rows:
@@ -1235,7 +1379,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gyro-sim bench",
         description="Work-precision benchmark: gyro_sim's integrator (every fidelity level) against "
-                    "scipy solve_ivp (DOP853, LSODA) on the same scenes; writes DIR/bench.md, bench.csv, "
+                    "scipy solve_ivp (DOP853, LSODA) and a compiled fixed-step RK4 on the same scenes; writes "
+                    "DIR/bench.md, bench.csv, "
                     "work_precision.png and prints the headline ratios.")
     p.add_argument("--quick", action="store_true", help="short horizons, under a minute")
     p.add_argument("--out", metavar="DIR", type=Path, default=Path("runs/bench"),
