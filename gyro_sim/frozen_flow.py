@@ -42,7 +42,8 @@ from numba import njit
 from .frames import quat_to_matrix
 from .kernels import _equal_steps, _rotl, record_sample
 
-__all__ = ["integrate_frozen", "frozen_flow_step", "frozen_flow_step_case", "steady_modes", "supported"]
+__all__ = ["integrate_frozen", "frozen_flow_step", "frozen_flow_step_case", "steady_modes", "supported",
+           "torque_scale"]
 
 
 def supported(J: np.ndarray) -> int:
@@ -55,6 +56,45 @@ def supported(J: np.ndarray) -> int:
     if J[0] == J[2]:
         return 1
     return -1
+
+
+#: the local torque scale is taken no smaller than this fraction of the bound at the largest slip: a frozen-flow
+#: step grows at most this many times as the torque dies away (a spin-up near synchronism, a nutation damped out)
+LOCAL_SCALE_MIN = 1e-4
+
+
+def torque_scale(Bre, Bim, om, L, Jt, Ja, e_a, c_m, w, tau, tail) -> float:
+    """The size (N m) of the mean torque the field gives at the present slips, for the frozen-flow step: with the
+    body turning about l̂ = L/|L| at Ω_p = |L|/J_t and about its axis e_a (case frame) at Ω_r = (1/J_a − 1/J_t) L·e_a
+    (the free motion of the module docstring), the part P_m(l̂) a of each phasor a (``Bre`` − i ``Bim``, T, rate
+    ``om`` rad/s) meets the conductor at the body-frame frequencies f = ν − m Ω_p − m₂ Ω_r (m, m₂ ∈ {−1, 0, 1}),
+    where its dissipative response is g(f) = Σ_n |w_n| |f|τ_n/(1 + (fτ_n)²) + T_tail|f| (at most ½Σ|w_n| + T_tail|f|:
+    the bound :meth:`gyro_sim.simulate.Simulator._frozen_flow_step` takes at the largest slip). Returns
+    c (Σ_k |a_k|) Σ_k Σ_m |P_m(l̂) a_k| max_m₂ g(f): an upper bound of the mean torque now, which falls with the
+    slip as a spin-up nears the field's rate and with the transverse field seen as a nutation is damped."""
+    Lm = float(np.linalg.norm(L))
+    if Lm == 0.0 or not om.size:
+        return math.inf
+    n = np.asarray(L, float) / Lm
+    om_p = Lm / Jt
+    om_r = (1.0 / Ja - 1.0 / Jt) * float(np.dot(L, e_a)) if e_a is not None else 0.0
+    a = np.asarray(Bre, float) - 1j * np.asarray(Bim, float)  # (k, 3)
+    along = (a @ n)[:, None] * n  # P_0(l̂) a
+    perp = a - along
+    cross = np.cross(n, perp)  # [n]× a (the along part has none)
+    amp = {0: np.linalg.norm(along, axis=1), 1: np.linalg.norm(0.5 * (perp - 1j * cross), axis=1),
+           -1: np.linalg.norm(0.5 * (perp + 1j * cross), axis=1)}
+    w, tau = np.abs(np.asarray(w, float)), np.asarray(tau, float)
+
+    def g(f: np.ndarray) -> np.ndarray:
+        f = np.abs(f)[:, None]
+        return np.sum(w * f * tau / (1.0 + (f * tau) ** 2), axis=1) + tail * f[:, 0]
+
+    N = 0.0
+    for m in (-1, 0, 1):
+        gm = np.max([g(om - m * om_p - m2 * om_r) for m2 in (-1, 0, 1)], axis=0)
+        N += float(np.sum(amp[m] * gm))
+    return c_m * float(np.sum(np.linalg.norm(a, axis=1))) * N
 
 
 @njit(cache=True, inline="always")

@@ -514,10 +514,21 @@ class Simulator:
         om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
                  float(np.max(np.abs(self.field_om), initial=0.0)))
         N = self.c_m * B * B * (0.5 * float(np.sum(np.abs(self.w))) + self.tail * (om + self._nu_max))
+        if N > 0:  # the mean torque at the present slips, no larger than the bound (a spin-up's step grows with it)
+            N = min(N, max(self._local_torque_scale(Bre, Bim), frozen_flow.LOCAL_SCALE_MIN * N))
         h = eps * float(np.min(self.J)) * om / N if N > 0 and om > 0 else math.inf
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
         return h
+
+    def _local_torque_scale(self, Bre: np.ndarray, Bim: np.ndarray) -> float:
+        """Mean torque scale (N m) at the present slips (:func:`gyro_sim.frozen_flow.torque_scale`) for an
+        axisymmetric or isotropic rotor."""
+        ax = frozen_flow.supported(self.J)
+        Jt, Ja = float(self.J[(ax + 1) % 3]), float(self.J[ax])
+        e_a = quat_to_matrix(self.y[3:7])[:, ax] if self.attitude and Jt != Ja else None
+        return frozen_flow.torque_scale(Bre, Bim, self.phasors()[2], self.y[0:3], Jt, Ja, e_a, self.c_m, self.w,
+                                        self.tau, self.tail)
 
     def _effect_rate(self) -> float:
         """Fastest rate (rad/s) an effect brings: the body rate the flywheel drives, the damper's spring."""
@@ -950,6 +961,7 @@ class Runner:
             f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
             if f is not None:
                 sim.step_div *= f
+            if f is not None or method == "frozen_flow":  # (frozen_flow: its step follows the torque at the slip now)
                 sim.replan()
                 sh.replan()
 
