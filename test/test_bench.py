@@ -265,3 +265,29 @@ def test_accuracy_part_smoke(tmp_path):
         print(f"\n  {r.scene}: achieved L {r.L:.1e}, attitude {r.q:.1e} (stated {r.rtol:g}, {r.attitude_tol:g}); "
               f"estimate {r.est_L:.1e}, {r.est_q:.1e}")
     assert accuracy_part is not None
+
+
+def test_baseline_sweep_stops_at_the_reference_floor(monkeypatch):
+    """A baseline whose error is already at the reference's own agreement with DOP853 (a stiff solid sphere: DOP853
+    took 37 754 steps at every rtol, 10 s each, error 6.1e-9 = the agreement) is not swept to tighter rtols: the
+    rows would measure the reference. Here a stand-in baseline 1e-9 off the reference at every rtol: one row per
+    method, and a note (before: all eight rtols each)."""
+    from gyro_sim import bench
+
+    ref = bench.run_ours("spinup_thin_shell", 0.01, 3072, "full/lawson8")
+    calls = []
+
+    def stand_in(scene, horizon, method, rtol, L_scale, extra=None, min_wall=0.0, max_reps=1):
+        calls.append((method, rtol))
+        return bench.Row(scene, horizon, f"solve_ivp {method}", "rtol", rtol, 0.0, 1, 1, L=ref.L * (1 + 1e-9),
+                         q=ref.q.copy(), cpu=1.0)
+
+    monkeypatch.setattr(bench, "run_baseline", stand_in)
+    cfg = bench.BenchConfig(mode="quick", scenes=("spinup_thin_shell",), default_horizon=0.01, spt_ref=3072,
+                            compiled_baseline=False, steps_per_turn=(48,), rate_changes=(1e-4,), min_wall=0.0,
+                            max_reps=1)
+    res = bench.Results(cfg)
+    bench.work_precision(res, "spinup_thin_shell", 0.01)
+    swept = [c for c in calls if c[1] != cfg.rtol_ref]
+    assert swept == [(m, cfg.rtols[0]) for m in cfg.baselines]
+    assert any("tighter" in n or "not run" in n for n in res.notes)
