@@ -1143,16 +1143,20 @@ def drive(r: Runner, on_samples=None, release: bool = False) -> None:
     when the run is interrupted (KeyboardInterrupt), up to the interruption."""
     from gyro_ctl.laws import make_law, make_switching
 
+    from . import ticks
+
     ctl = r.scene.controller
     law = make_law(ctl) if ctl is not None else None
     switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    loop = ticks.tick_loop(r, law) if switching is None else None  # ticks in compiled code where they can be
     clock = CompileClock()
     try:
         with clock:
             while not r.done:
                 if r.row > 0 and law is not None and r.is_control_tick:
                     r.apply_commands(law(r.control_input()))
-                rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
+                rows = (r.advance_located(law, switching) if switching is not None and r.row > 0
+                        else ticks.advance(r, loop))
                 if on_samples is not None and rows.stop > rows.start:
                     on_samples(r.samples(rows))
                     if release:
