@@ -162,14 +162,17 @@ def law_form(p) -> tuple[int, np.ndarray, list | None, list]:
 class CompiledLaw:
     """A built-in law with its limits as one call of :func:`gyro_ctl.law_kernels.law_commands`:
     ``law(x: ControlInput) -> Commands``, as the ROS controller node and Python callers use it. The attributes
-    (``kind``, ``fp``, ``current_limit``, ``rate_limit``: NaN = none) are what a compiled tick loop passes to the
-    same kernel (gyro_sim.ticks)."""
+    (``kind``, ``fp``, ``current_limit``, ``rate_limit``: NaN = none; ``needs_time``, ``reads_state``: whether the
+    commands depend on the time, on the time or the state) are what a compiled tick loop passes to the same kernel
+    (gyro_sim.ticks)."""
 
     def __init__(self, params, current_limit: float | None = None, rate_limit: float | None = None):
         self.kind, self.fp, self._names, self._control = law_form(params)
         self.current_limit, self.rate_limit = _nan(current_limit), _nan(rate_limit)
-        # the law reads the time only while a spin-up current ramps
+        # the law reads the time only while a spin-up current ramps; the state (L, q) only for ψ-switching: the
+        # commands of the others are the same at every tick
         self.needs_time = self.kind == lk.SPINUP and self.fp[1] == self.fp[1]
+        self.reads_state = self.needs_time or self.kind == lk.PSI_SWITCHING
 
     def command_names(self, stator_names) -> list:
         """The stators the law commands, in order (of ``stator_names``, the scene's, for law ``off``)."""

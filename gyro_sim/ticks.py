@@ -92,23 +92,59 @@ def _turn(phase, rate, dt):
 
 
 @njit
-def _step_of(h_max, span):
-    """The step bound of one advance: ``h_max``, or the whole span where the plan has none (Simulator.advance)."""
+def _bound(h_max, span):
+    """The step bound of an advance over ``span`` s: ``h_max``, or the whole span where the plan has none
+    (Simulator.advance; such advances go one break at a time)."""
     return h_max if math.isfinite(h_max) else max(span, 1e-300)
+
+
+@njit
+def _stops(bk, s_end, t_out, s, i, e):
+    """The stops of one advance through breaks bk[i..e] from sample index ``s``: each break's samples (recorded),
+    then the break itself where no sample falls on it (not recorded), as Simulator.advance takes them."""
+    n = 0
+    lo = s
+    for b in range(i, e + 1):
+        hi = s_end[b]
+        n += hi - lo + (1 if hi == lo or t_out[hi - 1] < bk[b] else 0)
+        lo = hi
+    stops = np.empty(n)
+    record = np.empty(n, np.bool_)
+    n = 0
+    lo = s
+    for b in range(i, e + 1):
+        hi = s_end[b]
+        for j in range(lo, hi):
+            stops[n] = t_out[j]
+            record[n] = True
+            n += 1
+        if hi == lo or t_out[hi - 1] < bk[b]:  # (a sample within round-off past the break is its last stop)
+            stops[n] = bk[b]
+            record[n] = False
+            n += 1
+        lo = hi
+    return stops, record
 
 
 @njit(cache=True)
 def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, out_N, phase, rate, cur,
-           ph_rows, cur_rows, rate_rows, law_at, t_law, kind, axes, fp, cl, rl, idx, log_c, log_r):
-    """Advance y from ``t`` through the breaks ``bk`` (s) under fixed commands, as :meth:`Runner.advance` does one
-    break at a time: the samples t_out[s0 : s_end[i]] (output row s − ``base``) are stops recorded on the way to
-    break i; their stator columns get the currents ``cur``, rates ``rate`` and phases turned on from the break
-    before; ``phase`` (rad) turns on to each break. Where ``law_at[i]`` the law (kind, axes, fp, limits cl, rl:
-    :func:`gyro_ctl.law_kernels.law_commands`) is evaluated at time ``t_law[i]`` on the state: if its commands
-    would change a stator (a current or rate, of stator ``idx[j]``, other than the one in force) the loop stops
-    there, else they are written to row n of ``log_c``, ``log_r`` (NaN: unchanged).
+           ph_rows, cur_rows, rate_rows, law_at, reads_state, t_law, kind, axes, fp, cl, rl, idx, log_c, log_r):
+    """Advance y from ``t`` through the breaks ``bk`` (s) under fixed commands, with the numbers
+    :meth:`Runner.advance` gives one break at a time: the samples t_out[s0 : s_end[i]] (output row s − ``base``)
+    are stops recorded on the way to break i; their stator columns get the currents ``cur``, rates ``rate`` and
+    phases turned on from the break before; ``phase`` (rad) turns on to each break. Where ``law_at[i]`` the law
+    (kind, axes, fp, limits cl, rl: :func:`gyro_ctl.law_kernels.law_commands`) is evaluated at time ``t_law[i]``
+    on the state: if its commands would change a stator (a current or rate, of stator ``idx[j]``, other than the
+    one in force) the loop stops there, else they are written to row n of ``log_c``, ``log_r`` (NaN: unchanged).
+    A law that does not read the state (``reads_state`` False) is evaluated at its first tick only: its commands
+    are those at every tick.
+
+    The steps between two evaluations of the law are taken in one stepper call (the same steps between the same
+    stops as break by break: each interval between stops is split alike, and the stepper keeps no other state;
+    without a step bound, one break at a time as Simulator.advance bounds the step by the break's span).
 
     Returns (breaks done, steps, the next sample index, commands logged)."""
+    nb = bk.shape[0]
     n_st = phase.shape[0]
     nc = idx.shape[0]
     c_new = np.empty(nc)
@@ -116,60 +152,63 @@ def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, ou
     steps = 0
     s = s0
     n_log = 0
-    for i in range(bk.shape[0]):
-        tb = bk[i]
-        hi = s_end[i]
-        m = hi - s
-        tail = m == 0 or t_out[hi - 1] < tb  # (a sample within round-off past the break is its last stop)
-        ns = m + 1 if tail else m
-        stops = np.empty(ns)
-        record = np.empty(ns, np.bool_)
-        for j in range(m):
-            stops[j] = t_out[s + j]
-            record[j] = True
-        if tail:
-            stops[m] = tb
-            record[m] = False
-        _, st = _step(Pf, Pz, Pa, y, t, t_seg, stops, record, _step_of(h_max, tb - t), out_y, out_N, s - base)
+    evaluate = True
+    bounded = math.isfinite(h_max)
+    i = 0
+    while i < nb:
+        e = i  # this advance ends at the next tick where the law is evaluated, else at the last break
+        while bounded and e < nb - 1 and not (law_at[e] and evaluate):
+            e += 1
+        stops, record = _stops(bk, s_end, t_out, s, i, e)
+        _, st = _step(Pf, Pz, Pa, y, t, t_seg, stops, record, _bound(h_max, bk[e] - t), out_y, out_N, s - base)
         steps += st
-        for j in range(m):
-            row = s - base + j
-            for k in range(n_st):
-                cur_rows[row, k] = cur[k]
-                rate_rows[row, k] = rate[k]
-                ph_rows[row, k] = np.mod(phase[k] + rate[k] * (t_out[s + j] - t), _TWO_PI)
-        _turn(phase, rate, tb - t)
-        t = tb
-        s = hi
-        if law_at[i]:
-            law_kernels.law_commands(kind, t_law[i], y[0:3], y[3:7], axes, fp, cl, rl, c_new, r_new)
+        for b in range(i, e + 1):
+            hi = s_end[b]
+            for j in range(s, hi):
+                row = j - base
+                for k in range(n_st):
+                    cur_rows[row, k] = cur[k]
+                    rate_rows[row, k] = rate[k]
+                    ph_rows[row, k] = np.mod(phase[k] + rate[k] * (t_out[j] - t), _TWO_PI)
+            _turn(phase, rate, bk[b] - t)
+            t = bk[b]
+            s = hi
+            if law_at[b] and not evaluate:  # the state-free law's commands, as at its first tick
+                for j in range(nc):
+                    log_c[n_log, j] = c_new[j]
+                    log_r[n_log, j] = r_new[j]
+                n_log += 1
+        if law_at[e] and evaluate:
+            law_kernels.law_commands(kind, t_law[e], y[0:3], y[3:7], axes, fp, cl, rl, c_new, r_new)
             for j in range(nc):
                 c, r = c_new[j], r_new[j]
                 if (c == c and c != cur[idx[j]]) or (r == r and r != rate[idx[j]]):
-                    return i + 1, steps, s, n_log
+                    return e + 1, steps, s, n_log
             for j in range(nc):
                 log_c[n_log, j] = c_new[j]
                 log_r[n_log, j] = r_new[j]
             n_log += 1
-    return bk.shape[0], steps, s, n_log
+            evaluate = reads_state
+        i = e + 1
+    return nb, steps, s, n_log
 
 
 @njit(cache=True)
 def follow(Pf, Pz, Pa, y, t, t_seg, h_max, bk, phase, rate):
-    """Advance y from ``t`` through the breaks ``bk`` without samples, as Simulator.advance(tb) one break at a time
-    (the shadow run following its leader); ``phase`` turns on to each. Returns the steps."""
-    out_y = np.zeros((1, y.shape[0]))
-    out_N = np.zeros((1, 3))
-    stops = np.empty(1)
-    record = np.zeros(1, np.bool_)
+    """Advance y from ``t`` through the breaks ``bk`` without samples, with the numbers of Simulator.advance(tb)
+    one break at a time (the shadow run following its leader), in one stepper call; ``phase`` turns on to each.
+    Returns the steps."""
+    out_y, out_N = np.zeros((1, y.shape[0])), np.zeros((1, 3))
     steps = 0
+    if math.isfinite(h_max):
+        _, steps = _step(Pf, Pz, Pa, y, t, t_seg, bk.copy(), np.zeros(bk.shape[0], np.bool_), h_max, out_y, out_N, 0)
     for i in range(bk.shape[0]):
-        tb = bk[i]
-        stops[0] = tb
-        _, st = _step(Pf, Pz, Pa, y, t, t_seg, stops, record, _step_of(h_max, tb - t), out_y, out_N, 0)
-        steps += st
-        _turn(phase, rate, tb - t)
-        t = tb
+        if not math.isfinite(h_max):
+            _, st = _step(Pf, Pz, Pa, y, t, t_seg, bk[i:i + 1].copy(), np.zeros(1, np.bool_), _bound(h_max, bk[i] - t),
+                          out_y, out_N, 0)
+            steps += st
+        _turn(phase, rate, bk[i] - t)
+        t = bk[i]
     return steps
 
 
@@ -214,11 +253,12 @@ class TickLoop:
         self._s_end = np.searchsorted(r.t_out, bk + 1e-12 * np.maximum(1.0, bk), side="right")
         sim = r.sim
         if law is None:
-            self.kind, self.fp, self.cl, self.rl, self.needs_time = law_kernels.HOLD, np.zeros(0), math.nan, math.nan, False
+            self.kind, self.fp, self.cl, self.rl = law_kernels.HOLD, np.zeros(0), math.nan, math.nan
+            self.needs_time = self.reads_state = False
             self.names, self.axes = [], _NO_AXES
         else:
             self.kind, self.fp, self.cl, self.rl = law.kind, law.fp, law.current_limit, law.rate_limit
-            self.needs_time = law.needs_time
+            self.needs_time, self.reads_state = law.needs_time, law.reads_state
             self.names = law.command_names(sim.stator_names)
             self.axes = law.control_axes(sim.stator_names, np.cross(sim.e1, sim.e2))  # (the axes control_input gives)
         self.idx = np.array([sim.stator_names.index(n) for n in self.names], dtype=np.int64)
@@ -253,7 +293,7 @@ class TickLoop:
             phase = sim.phase.copy()
             nb, steps, s_hi, n_log = breaks(
                 *stepper(sim, seg), sim.y, sim.t, seg[0], seg[6], bk, self._s_end[i0:j], r.t_out, row0, r._base, r.out_y, r.out_N,
-                phase, sim.rate, sim.current, r.phase, r.cur, r.rate, law_at, t_law, self.kind, self.axes, self.fp,
+                phase, sim.rate, sim.current, r.phase, r.cur, r.rate, law_at, self.reads_state, t_law, self.kind, self.axes, self.fp,
                 self.cl, self.rl, self.idx, log_c, log_r)
             sim.steps += steps
             sim.phase = phase
@@ -288,8 +328,7 @@ class TickLoop:
     def _log(self, times: np.ndarray, cur: np.ndarray, rate: np.ndarray) -> None:
         """The commands of the ticks whose law changed nothing, in the runner's log as apply_commands writes them."""
         cs, rs = cur.tolist(), rate.tolist()
-        if np.isnan(cur).any() or np.isnan(rate).any():
-            cs = [[None if v != v else v for v in row] for row in cs]
+        if self.kind == law_kernels.OFF:  # (the one law with a field left unchanged: its rates)
             rs = [[None if v != v else v for v in row] for row in rs]
         names = self.names
         self.r.command_log.extend((t, list(names), c, v) for t, c, v in zip(times.tolist(), cs, rs))
