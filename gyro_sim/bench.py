@@ -496,6 +496,7 @@ class BenchConfig:
     profile: bool = True
     ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
+    ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
     only: Optional[str] = None  # run this part alone ("accuracy")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
@@ -543,6 +544,7 @@ class Results:
     savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
+    ticks: list = field(default_factory=list)  # dicts of the per-tick part (bench_ticks)
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     notes: list = field(default_factory=list)
     started: str = ""
@@ -1037,6 +1039,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     if cfg.profile:
         savings(res)
         profile_kernels(res)
+    if cfg.ticks:
+        from .bench_ticks import ticks_part
+
+        ticks_part(res, quick=cfg.mode == "quick")
     if cfg.ros:
         from .bench_ros import ros_part
 
@@ -1323,7 +1329,9 @@ def markdown(res: Results) -> str:
                      + (f"{p['ns']:.2f} (ratio)" if p.get("unit") == "ratio" else f"{p['ns']:.4g}")
                      for p in res.profile])
     from .bench_ros import markdown as ros_markdown
+    from .bench_ticks import markdown_lines as ticks_markdown
 
+    L += ticks_markdown(res)
     L += ros_markdown(res)
     if res.accuracy is not None:
         from .bench_accuracy import markdown_lines

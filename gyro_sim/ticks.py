@@ -23,7 +23,8 @@ each break), ``sampling: events`` (the located switches stay in Python).
 from __future__ import annotations
 
 import math
-from typing import Optional
+from contextlib import contextmanager
+from typing import Iterator, Optional
 
 import numpy as np
 from numba import njit
@@ -36,13 +37,14 @@ from .compile_watch import CompileClock
 from .effects import ON
 from .messages import stamp_ns
 
-__all__ = ["TickLoop", "tick_loop", "advance", "MAX_BREAKS"]
+__all__ = ["TickLoop", "tick_loop", "advance", "python_ticks", "MAX_BREAKS"]
 
 #: most breaks one compiled call advances through: an ``on_samples`` caller (progress line, streamed bag) hears
 #: from the run at least that often
 MAX_BREAKS = 512
 _TWO_PI = 2 * math.pi
 _NO_AXES = np.zeros((0, 3))
+_ENABLED = [True]  # False inside python_ticks()
 
 
 # --- the steppers of Simulator.advance with one signature (their own arguments in the tuple P) ----------------
@@ -338,7 +340,7 @@ def tick_loop(r, law) -> Optional[TickLoop]:
     """The compiled tick loop of runner ``r`` driven by ``law`` (a :class:`gyro_ctl.laws.CompiledLaw`, or None: no
     controller), or None where it does not apply: a law without a compiled form, an effect on (the step plan is
     made afresh at each break), a law naming a stator the scene lacks (the Python loop then says so)."""
-    if law is not None and not isinstance(law, CompiledLaw):
+    if not _ENABLED[0] or law is not None and not isinstance(law, CompiledLaw):
         return None
     if r.sim.eff[ON] != 0.0:
         return None
@@ -353,3 +355,14 @@ def advance(r, loop: Optional[TickLoop], until: Optional[float] = None) -> slice
     ``loop`` (:func:`tick_loop`) applies, else :meth:`Runner.advance` (to the next break, or ``until`` s)."""
     rows = loop.advance(until) if loop is not None else None
     return rows if rows is not None else r.advance(until=until)
+
+
+@contextmanager
+def python_ticks() -> Iterator[None]:
+    """Within the block, runs take their ticks break by break in Python (:func:`tick_loop` gives None): the
+    loop before this module, to compare with (the benchmark's per-tick part, the tests)."""
+    _ENABLED[0] = False
+    try:
+        yield
+    finally:
+        _ENABLED[0] = True
