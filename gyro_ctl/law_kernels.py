@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-__all__ = ["SPINUP", "PSI_SWITCHING", "OFF", "HOLD", "MANUAL", "law_commands", "law_values", "limit_values"]
+__all__ = ["SPINUP", "PSI_SWITCHING", "OFF", "HOLD", "MANUAL", "law_commands", "law_values", "limit_values", "warm"]
 
 SPINUP, PSI_SWITCHING, OFF, HOLD, MANUAL = 0, 1, 2, 3, 4
 
@@ -117,3 +118,10 @@ def law_commands(kind, t, L, q, axes, fp, current_limit, rate_limit, cur, rate):
     """:func:`law_values` then :func:`limit_values`: the commands a controller sends (NaN limits: none)."""
     law_values(kind, t, L, q, axes, fp, cur, rate)
     limit_values(cur, rate, current_limit, rate_limit)
+
+
+def warm() -> None:
+    """Call :func:`law_commands` once with the argument types every caller uses: numba loads it from its cache (or
+    compiles it) now rather than at a controller's first tick."""
+    law_commands(HOLD, 0.0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros((0, 3)), np.zeros(0), math.nan,
+                 math.nan, np.zeros(0), np.zeros(0))

@@ -1,8 +1,9 @@
 """Control ticks in compiled code: an in-process run advances through many breaks in one numba call.
 
-Break by break (:meth:`gyro_sim.simulate.Runner.advance`), each controller tick costs tens of µs of Python: the
-law on a :class:`gyro_ctl.laws.ControlInput`, the commands applied to the simulator and its shadow, the step of
-each, the samples' bookkeeping, the shadow's follow. :class:`TickLoop` advances a runner through consecutive
+Break by break (:meth:`gyro_sim.simulate.Runner.advance`), each controller tick costs tens of µs of Python (about
+60 µs on the default scene, measured before this module: docs/benchmark.md): the law on a
+:class:`gyro_ctl.laws.ControlInput`, the commands applied to the simulator and its shadow, the call of each one's
+stepper, the samples' bookkeeping, the shadow's follow. :class:`TickLoop` advances a runner through consecutive
 *plain* breaks (controller ticks and output samples; not a scene command, an error-control check, a flywheel knot
 or the end, which stay with the Python loop) in one compiled call: at each break it takes the same steps between
 the same stops as :meth:`Simulator.advance`, writes the samples' stator columns and turns the field phases on
@@ -273,50 +274,61 @@ class TickLoop:
         r = self.r
         if r.row == 0 or r.done:
             return None
-        i0 = r._bi
-        bk_all = r.breaks
-        j = min(int(self._next_special[i0]), i0 + MAX_BREAKS)
-        if until is not None:
-            j = min(j, int(np.searchsorted(bk_all, until, side="right")))
-        room = r._base + r.out_y.shape[0]  # the first sample the output buffer cannot take
-        j = min(j, i0 + int(np.searchsorted(self._s_end[i0:j], room, side="right")))
+        i0, j = r._bi, self._extent(until)
         if j <= i0:
             return None
-        sim, sh = r.sim, r.shadow
-        bk = bk_all[i0:j]
-        law_at = self._tick[i0:j].copy()
-        law_at[-1] = False  # the last break returns to the Python loop, which runs the law there
-        t_law = np.array([stamp_ns(t) * 1e-9 for t in bk.tolist()]) if self.needs_time else bk
-        nc = self.idx.size
-        log_c, log_r = np.empty((bk.size, nc)), np.empty((bk.size, nc))
-        row0 = r.row
         with CompileClock() as clock:
-            seg = sim._segment()
-            phase = sim.phase.copy()
-            nb, steps, s_hi, n_log = breaks(
-                *stepper(sim, seg), sim.y, sim.t, seg[0], seg[6], bk, self._s_end[i0:j], r.t_out, row0, r._base, r.out_y, r.out_N,
-                phase, sim.rate, sim.current, r.phase, r.cur, r.rate, law_at, self.reads_state, t_law, self.kind, self.axes, self.fp,
-                self.cl, self.rl, self.idx, log_c, log_r)
-            sim.steps += steps
-            sim.phase = phase
-            sim.t = sim._seg_t_end = float(bk[nb - 1])
-            rows = slice(row0, s_hi)
-            r.row, r._bi = s_hi, i0 + nb
-            r._accumulate(r.t_out[row0:s_hi], r._buf(rows))
+            bk, law_at, rows, n_log, log_c, log_r = self._advance_main(r.breaks[i0:j])
+            nb = r._bi - i0
             common = bk[:nb][self._common[i0:i0 + nb]]
-            if sh is not None and common.size:
-                self._follow(seg, common, steps)
+            if r.shadow is not None and common.size:
+                self._follow(common)
         r.wall_time += clock.wall
         r.compile_time += clock.compile
         if n_log:
             self._log(bk[:nb][law_at[:nb]][:n_log], log_c[:n_log], log_r[:n_log])
         return rows
 
-    def _follow(self, seg: tuple, common: np.ndarray, steps: int) -> None:
+    def _extent(self, until: Optional[float]) -> int:
+        """The end (exclusive index of r.breaks) of the plain breaks the next call may take."""
+        r = self.r
+        i0 = r._bi
+        j = min(int(self._next_special[i0]), i0 + MAX_BREAKS)
+        if until is not None:
+            j = min(j, int(np.searchsorted(r.breaks, until, side="right")))
+        room = r._base + r.out_y.shape[0]  # the first sample the output buffer cannot take
+        return min(j, i0 + int(np.searchsorted(self._s_end[i0:j], room, side="right")))
+
+    def _advance_main(self, bk: np.ndarray) -> tuple:
+        """The run through breaks ``bk`` (from r._bi on) in one call of :func:`breaks`: its state, samples, field
+        phases, steps, the runner's row and break index and its error sums. Returns (bk, where the law was due,
+        the output rows written, commands logged, their currents, their rates)."""
+        r = self.r
+        sim, i0, row0 = r.sim, r._bi, r.row
+        law_at = self._tick[i0:i0 + bk.size].copy()
+        law_at[-1] = False  # the last break returns to the Python loop, which runs the law there
+        t_law = np.array([stamp_ns(t) * 1e-9 for t in bk.tolist()]) if self.needs_time else bk
+        log_c, log_r = np.empty((bk.size, self.idx.size)), np.empty((bk.size, self.idx.size))
+        seg = sim._segment()
+        phase = sim.phase.copy()
+        nb, steps, s_hi, n_log = breaks(
+            *stepper(sim, seg), sim.y, sim.t, seg[0], seg[6], bk, self._s_end[i0:i0 + bk.size], r.t_out, row0,
+            r._base, r.out_y, r.out_N, phase, sim.rate, sim.current, r.phase, r.cur, r.rate, law_at,
+            self.reads_state, t_law, self.kind, self.axes, self.fp, self.cl, self.rl, self.idx, log_c, log_r)
+        sim.steps += steps
+        sim.phase = phase
+        sim.t = sim._seg_t_end = float(bk[nb - 1])
+        rows = slice(row0, s_hi)
+        r.row, r._bi = s_hi, i0 + nb
+        r._accumulate(r.t_out[row0:s_hi], r._buf(rows))
+        return bk, law_at, rows, n_log, log_c, log_r
+
+    def _follow(self, common: np.ndarray) -> None:
         """The shadow run follows through the common breaks ``common`` (Runner._follow, none a check) in one call;
         its steps and the run's count for the error control."""
         r = self.r
         sim, sh = r.sim, r.shadow
+        seg = sim._seg[1]  # (the run's segment of this chunk)
         sseg = sh._segment()
         phase = sh.phase.copy()
         s_steps = follow(*stepper(sh, sseg), sh.y, sh.t, sseg[0], sseg[6], common, phase, sh.rate)
