@@ -498,7 +498,7 @@ class BenchConfig:
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
     ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
-    only: Optional[str] = None  # run this part alone ("accuracy")
+    only: Optional[str] = None  # run this part alone ("accuracy", "ticks")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -1018,6 +1018,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
+    if cfg.only == "ticks":
+        from .bench_ticks import ticks_part
+
+        ticks_part(res, quick=cfg.mode == "quick")
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     for scene in cfg.scenes:
         work_precision(res, scene, cfg.horizon_of(scene))
         for base, extra in cfg.variants:
@@ -1398,7 +1405,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
     p.add_argument("--no-accuracy", action="store_true",
                    help="skip the accuracy part (every built-in scene against the accuracy it states)")
-    p.add_argument("--only", choices=["accuracy"], help="run this part alone")
+    p.add_argument("--only", choices=["accuracy", "ticks"], help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")
     return p
