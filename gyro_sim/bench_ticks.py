@@ -90,15 +90,18 @@ def markdown_lines(res) -> list:
 
     on_off = _ratio(res, CASES[0][0], "controller on, compiled ticks")
     ns = [(v["case"], v["ratio"]) for v in res.ticks if v["case"].startswith("nutation_slow") and v["ratio"]]
-    summary = (f"The default scene as shipped costs {on_off:.3g}x with its controller what it costs without"
-               if on_off else "")
+    parts = [f"the default scene as shipped costs {on_off:.3g}x with its controller what it costs without"
+             ] if on_off else []
     if ns:
-        summary += "; the compiled ticks run " + ", ".join(f"{c} {x:.3g}x faster than the Python break loop"
-                                                             for c, x in ns)
+        parts.append("against the Python break loop the compiled ticks run " + " and ".join(
+            f"`{c}` {x:.3g}x faster" for c, x in ns))
+    summary = "; ".join(parts)
+    summary = summary[:1].upper() + summary[1:]
     return _table("## Control ticks in-process (CPU; compiled tick loop against the break-by-break Python loop)",
                   "case | run | duration s | CPU s | CPU ms per simulated s | wall s | steps | ratio (CPU)",
                   [_row(v) for v in res.ticks],
                   [summary + ".", "Both loops call the compiled law (gyro_ctl/law_kernels.py); the Python loop before "
-                   "issue 23 also ran the laws in Python. Without the controller the shadow run of the error control "
-                   "stops only at the checks, with it at every tick: with steps as long as the ticks (accuracy of L "
-                   "alone) it takes that many more steps."])
+                   "issue 23 also ran the laws in Python (scripts/tick_cost.py compares two versions of the code). "
+                   "Without the controller the shadow run of the error control stops only at its checks, with it at "
+                   "every tick too: where the steps are as long as the ticks (accuracy of L alone) the shadow takes "
+                   "that many more steps."])
