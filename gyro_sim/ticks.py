@@ -10,7 +10,7 @@ the same stops as :meth:`Simulator.advance`, writes the samples' stator columns 
 as :meth:`Runner.advance` does, and at a tick evaluates the built-in law (:func:`gyro_ctl.law_kernels.
 law_commands`, the code the ROS controller node calls) on the state. It stops at the first tick whose commands
 would change what the stators do; the Python loop applies them there as before. The shadow run of the error
-control then follows through the same ticks in one call.
+control then follows through the same ticks in one call (of the same compiled loop, without samples or law).
 
 Every number is the break-by-break loop's: the same steps between the same stops (the phasors and step plan are
 kept across breaks while the commands stand), the field phases turned on break by break, the law's commands
@@ -196,25 +196,6 @@ def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, ou
     return nb, steps, s, n_log
 
 
-@njit(cache=True)
-def follow(Pf, Pz, Pa, y, t, t_seg, h_max, bk, phase, rate):
-    """Advance y from ``t`` through the breaks ``bk`` without samples, with the numbers of Simulator.advance(tb)
-    one break at a time (the shadow run following its leader), in one stepper call; ``phase`` turns on to each.
-    Returns the steps."""
-    out_y, out_N = np.zeros((1, y.shape[0])), np.zeros((1, 3))
-    steps = 0
-    if math.isfinite(h_max):
-        _, steps = _step(Pf, Pz, Pa, y, t, t_seg, bk.copy(), np.zeros(bk.shape[0], np.bool_), h_max, out_y, out_N, 0)
-    for i in range(bk.shape[0]):
-        if not math.isfinite(h_max):
-            _, st = _step(Pf, Pz, Pa, y, t, t_seg, bk[i:i + 1].copy(), np.zeros(1, np.bool_), _bound(h_max, bk[i] - t),
-                          out_y, out_N, 0)
-            steps += st
-        _turn(phase, rate, bk[i] - t)
-        t = bk[i]
-    return steps
-
-
 def stepper(sim, seg: tuple) -> tuple:
     """(Pf, Pz, Pa): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
     ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow or free, the others None; the
@@ -331,7 +312,14 @@ class TickLoop:
         seg = sim._seg[1]  # (the run's segment of this chunk)
         sseg = sh._segment()
         phase = sh.phase.copy()
-        s_steps = follow(*stepper(sh, sseg), sh.y, sh.t, sseg[0], sseg[6], common, phase, sh.rate)
+        n, k = common.size, sh.rate.size
+        # (breaks without samples or law: one stepper call through them, as Simulator.advance(tb) break by break; the
+        # run's argument types, so numba compiles no second loop)
+        _, s_steps, _, _ = breaks(
+            *stepper(sh, sseg), sh.y, sh.t, sseg[0], sseg[6], common, np.zeros(n, np.int64), common, 0, 0,
+            np.zeros((1, sh.y.size)), np.zeros((1, 3)), phase, sh.rate, sh.current, np.zeros((1, k)),
+            np.zeros((1, k)), np.zeros((1, k)), np.zeros(n, np.bool_), False, common, law_kernels.HOLD, _NO_AXES,
+            np.zeros(0), math.nan, math.nan, np.zeros(0, np.int64), np.zeros((n, 0)), np.zeros((n, 0)))
         sh.steps += s_steps
         sh.phase = phase
         sh.t = sh._seg_t_end = float(common[-1])
