@@ -4,6 +4,11 @@ A law takes a :class:`ControlInput` (what the simulator publishes: time, L in th
 attitude, body angular velocity, the stators' names and axes) and its parameters, and returns
 stator commands ``{name: (current A, signed field rate rad/s)}``. The same function runs inside
 the core (``gyro_sim.run``) and in the controller node (``gyro_ctl.ros.controller``).
+
+The built-in laws spinup, psi_switching, off, hold and manual, and the limits, are written once, compiled
+(:mod:`gyro_ctl.law_kernels`): the functions here and :class:`CompiledLaw` call that code, and in-process runs call
+it from their compiled tick loop (:mod:`gyro_sim.ticks`). Other laws (reorient, or a Python function put in
+:data:`LAWS`) run as Python at each tick.
 """
 from __future__ import annotations
 
@@ -13,6 +18,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from . import law_kernels as lk
 from .reorient import reorient
 from .config import ControllerConfig, HoldParams, ManualParams, OffParams, PsiSwitchingParams, SpinupParams
 
@@ -53,10 +59,10 @@ def spinup(x: ControlInput, p: SpinupParams) -> Commands:
     """Spin-up ([K] §1): the spin stator's field turns at the target spin rate; current ramps to its limit.
 
     The quasi-static torque k_e B0²(ν − Ω) ([K] (1.3)) vanishes at Ω = ν, so the target spin is the
-    zero-slip asymptote; time constant J3/(k_e b² I²) (see :func:`spinup_time_constant`).
+    zero-slip asymptote; time constant J3/(k_e b² I²) (see :func:`spinup_time_constant`). Compiled:
+    :func:`gyro_ctl.law_kernels.law_values`.
     """
-    current = p.current if p.ramp is None else min(p.current, p.ramp * x.t)
-    return {p.stator: (current, p.target_spin)}
+    return CompiledLaw(p)(x)
 
 
 def spinup_time_constant(J3: float, k_e: float, coil_constant: float, current: float) -> float:
@@ -83,18 +89,9 @@ def psi_switching(x: ControlInput, p: PsiSwitchingParams) -> Commands:
     the stator's plane); the spin stator stays on at ν0 to make up the braking torque. ν > 0 drives
     θ → 0, ν < 0 drives θ → π. Inside the dead band (θ < dead_band or π − θ < dead_band) the
     control currents are off, so the undefined e⊥ near θ = 0, π never drives noise-led switching.
+    Compiled: :func:`gyro_ctl.law_kernels.law_values`.
     """
-    out: Commands = {p.spin_stator: (p.spin_current, p.spin_rate)}
-    th = x.theta
-    e = transverse_unit(x)
-    if e is None or th < p.dead_band or math.pi - th < p.dead_band:
-        for i, name in enumerate(p.control_stators):
-            out[name] = (0.0, p.rate(i))
-        return out
-    for i, name in enumerate(p.control_stators):
-        s = float(x.axis(name) @ e)
-        out[name] = (p.control_current, p.rate(i) if s >= 0.0 else -p.rate(i))  # [K] (3.1)
-    return out
+    return CompiledLaw(p)(x)
 
 
 def psi_switching_functions(x: ControlInput, p: PsiSwitchingParams) -> np.ndarray:
@@ -112,42 +109,111 @@ def psi_switching_functions(x: ControlInput, p: PsiSwitchingParams) -> np.ndarra
 
 def off(x: ControlInput, p: OffParams) -> Commands:
     """Every stator off (0 A), rates unchanged."""
-    return {n: (0.0, None) for n in x.stator_names}
+    return CompiledLaw(p)(x)
 
 
 def hold(x: ControlInput, p: HoldParams) -> Commands:
     """Keep the last commands (send nothing)."""
-    return {}
+    return CompiledLaw(p)(x)
 
 
 def manual(x: ControlInput, p: ManualParams) -> Commands:
     """The fixed commands of the parameters."""
-    return {n: (c.current, c.rate) for n, c in p.commands.items()}
+    return CompiledLaw(p)(x)
 
 
-LAWS: Mapping[str, Callable] = {"spinup": spinup, "psi_switching": psi_switching, "off": off, "hold": hold,
-                                "manual": manual, "reorient": reorient}
+#: the laws with a compiled form (gyro_ctl.law_kernels), by name
+COMPILED: Mapping[str, Callable] = {"spinup": spinup, "psi_switching": psi_switching, "off": off, "hold": hold,
+                                    "manual": manual}
+LAWS: Mapping[str, Callable] = {**COMPILED, "reorient": reorient}
 SWITCHING: Mapping[str, Callable] = {"psi_switching": psi_switching_functions}
+_NO_AXES = np.zeros((0, 3))
+
+
+def _nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _optional(values: np.ndarray) -> list:
+    """Array values as a list of floats, NaN as None (a command field left unchanged)."""
+    return [None if v != v else v for v in values.tolist()]
+
+
+def law_form(p) -> tuple[int, np.ndarray, list | None, list]:
+    """The compiled form of built-in law parameters ``p``: (kind, float parameters, the stator names it commands
+    in order (None: every stator of the input, law ``off``), the control stators whose axes it reads), as
+    :mod:`gyro_ctl.law_kernels` describes them."""
+    if isinstance(p, SpinupParams):
+        return lk.SPINUP, np.array([p.current, _nan(p.ramp), p.target_spin]), [p.stator], []
+    if isinstance(p, PsiSwitchingParams):
+        ctl = list(p.control_stators)
+        fp = [p.spin_current, p.spin_rate, p.control_current, p.dead_band] + [p.rate(i) for i in range(len(ctl))]
+        return lk.PSI_SWITCHING, np.array(fp, dtype=float), [p.spin_stator] + ctl, ctl
+    if isinstance(p, OffParams):
+        return lk.OFF, np.zeros(0), None, []
+    if isinstance(p, HoldParams):
+        return lk.HOLD, np.zeros(0), [], []
+    if isinstance(p, ManualParams):
+        return (lk.MANUAL, np.array([v for c in p.commands.values() for v in (c.current, c.rate)], dtype=float),
+                list(p.commands), [])
+    raise TypeError(f"law parameters {type(p).__name__}: no compiled form")
+
+
+class CompiledLaw:
+    """A built-in law with its limits as one call of :func:`gyro_ctl.law_kernels.law_commands`:
+    ``law(x: ControlInput) -> Commands``, as the ROS controller node and Python callers use it. The attributes
+    (``kind``, ``fp``, ``current_limit``, ``rate_limit``: NaN = none; ``needs_time``, ``reads_state``: whether the
+    commands depend on the time, on the time or the state) are what a compiled tick loop passes to the same kernel
+    (gyro_sim.ticks)."""
+
+    def __init__(self, params, current_limit: float | None = None, rate_limit: float | None = None):
+        self.kind, self.fp, self._names, self._control = law_form(params)
+        self.current_limit, self.rate_limit = _nan(current_limit), _nan(rate_limit)
+        # the law reads the time only while a spin-up current ramps; the state (L, q) only for ψ-switching: the
+        # commands of the others are the same at every tick
+        self.needs_time = self.kind == lk.SPINUP and self.fp[1] == self.fp[1]
+        self.reads_state = self.needs_time or self.kind == lk.PSI_SWITCHING
+
+    def command_names(self, stator_names) -> list:
+        """The stators the law commands, in order (of ``stator_names``, the scene's, for law ``off``)."""
+        return list(stator_names) if self._names is None else list(self._names)
+
+    def control_axes(self, stator_names, stator_axes) -> np.ndarray:
+        """(n, 3) unit axes (case frame) of the control stators the law reads (ValueError for an unknown name)."""
+        if not self._control:
+            return _NO_AXES
+        names = list(stator_names)
+        return np.array([stator_axes[names.index(n)] for n in self._control], dtype=float)
+
+    def __call__(self, x: ControlInput) -> Commands:
+        names = self.command_names(x.stator_names)
+        cur, rate = np.empty(len(names)), np.empty(len(names))
+        lk.law_commands(self.kind, float(x.t), np.ascontiguousarray(x.L, dtype=float),
+                        np.ascontiguousarray(x.q, dtype=float), self.control_axes(x.stator_names, x.stator_axes),
+                        self.fp, self.current_limit, self.rate_limit, cur, rate)
+        return dict(zip(names, zip(_optional(cur), _optional(rate))))
 
 
 def limited(commands: Commands, current_limit: float | None, rate_limit: float | None) -> Commands:
-    """Commands clipped to 0 ≤ current ≤ current_limit (A) and |rate| ≤ rate_limit (rad/s)."""
+    """Commands clipped to 0 ≤ current ≤ current_limit (A) and |rate| ≤ rate_limit (rad/s)
+    (:func:`gyro_ctl.law_kernels.limit_values`)."""
     if current_limit is None and rate_limit is None:
         return commands
-    out = {}
-    for n, (c, r) in commands.items():
-        if c is not None and current_limit is not None:
-            c = min(max(c, 0.0), current_limit)
-        if r is not None and rate_limit is not None:
-            r = min(max(r, -rate_limit), rate_limit)
-        out[n] = (c, r)
-    return out
+    names = list(commands)
+    cur = np.array([_nan(commands[n][0]) for n in names])
+    rate = np.array([_nan(commands[n][1]) for n in names])
+    lk.limit_values(cur, rate, _nan(current_limit), _nan(rate_limit))
+    return dict(zip(names, zip(_optional(cur), _optional(rate))))
 
 
 def make_law(cfg: ControllerConfig) -> Callable[[ControlInput], Commands]:
-    """The law of a controller config (with its limits) as a one-argument function of the state."""
+    """The law of a controller config (with its limits) as a one-argument function of the state: a
+    :class:`CompiledLaw` for the built-in laws with a compiled form, else (reorient, or a law put in :data:`LAWS`
+    in place of a built-in one) the Python function."""
     fn = LAWS[cfg.law]
     params, cl, rl = cfg.params, cfg.current_limit, cfg.rate_limit
+    if COMPILED.get(cfg.law) is fn:
+        return CompiledLaw(params, cl, rl)
     return lambda x: limited(fn(x, params), cl, rl)
 
 

@@ -500,8 +500,9 @@ class BenchConfig:
     profile: bool = True
     ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
+    ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
-    only: Optional[str] = None  # run this part alone ("accuracy")
+    only: Optional[str] = None  # run this part alone ("accuracy", "ticks")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -547,6 +548,7 @@ class Results:
     savings: list = field(default_factory=list)  # dicts: what, how, cpu with the saving and without
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
+    ticks: list = field(default_factory=list)  # dicts of the per-tick part (bench_ticks)
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     notes: list = field(default_factory=list)
     started: str = ""
@@ -1014,6 +1016,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
+    if cfg.only == "ticks":
+        from .bench_ticks import ticks_part
+
+        ticks_part(res, quick=cfg.mode == "quick")
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     for scene in cfg.scenes:
         work_precision(res, scene, cfg.horizon_of(scene))
         for base, extra in cfg.variants:
@@ -1035,6 +1044,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     if cfg.profile:
         savings(res)
         profile_kernels(res)
+    if cfg.ticks:
+        from .bench_ticks import ticks_part
+
+        ticks_part(res, quick=cfg.mode == "quick")
     if cfg.ros:
         from .bench_ros import ros_part
 
@@ -1320,7 +1333,9 @@ def markdown(res: Results) -> str:
                      + (f"{p['ns']:.2f} (ratio)" if p.get("unit") == "ratio" else f"{p['ns']:.4g}")
                      for p in res.profile])
     from .bench_ros import markdown as ros_markdown
+    from .bench_ticks import markdown_lines as ticks_markdown
 
+    L += ticks_markdown(res)
     L += ros_markdown(res)
     if res.accuracy is not None:
         from .bench_accuracy import markdown_lines
@@ -1387,7 +1402,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
     p.add_argument("--no-accuracy", action="store_true",
                    help="skip the accuracy part (every built-in scene against the accuracy it states)")
-    p.add_argument("--only", choices=["accuracy"], help="run this part alone")
+    p.add_argument("--only", choices=["accuracy", "ticks"], help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")
     return p

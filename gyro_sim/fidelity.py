@@ -45,6 +45,7 @@ from typing import Optional
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from . import ticks
 from .averaged_m import AveragedM, averaged_m_model
 from .compile_watch import compile_seconds
 from .slow_k import ENTER_MARGIN, MU_MAX, SlowK, slow_k_of
@@ -249,6 +250,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optiona
     ctl = scene.controller
     law = make_law(ctl) if ctl is not None else None
     switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    loop = ticks.tick_loop(r, law) if switching is None else None  # ticks in compiled code where they can be
     switched = set(ctl.params.control_stators) if ctl is not None and ctl.law == "psi_switching" else set()
     strict = scene.fidelity == "averaged"
     w0, c0 = time.perf_counter(), compile_seconds()
@@ -286,7 +288,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optiona
             continue
         if until is not None and until <= sim.t + 1e-12 * max(1.0, sim.t):  # never an advance of zero
             until = float(r.t_out[r.row]) if r.row < r.t_out.size else None
-        r.advance(until=until)
+        ticks.advance(r, loop, until)
     res = r.result()
     res.compile_time = compile_seconds() - c0
     res.wall_time = time.perf_counter() - w0 - res.compile_time

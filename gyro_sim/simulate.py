@@ -1152,19 +1152,24 @@ def drive(r: Runner, on_samples=None, release: bool = False) -> None:
     with ``sampling: events``), calling ``on_samples(dict)`` with each new chunk of output rows
     (:meth:`Runner.samples`). ``release``: after each call the rows (and logged commands) are released, so
     memory stays flat (a streamed run: the caller took them). ``r.wall_time`` / ``r.compile_time`` are set even
-    when the run is interrupted (KeyboardInterrupt), up to the interruption."""
+    when the run is interrupted (KeyboardInterrupt), up to the interruption. Ticks and samples between the other
+    breaks go through the compiled tick loop where it applies (gyro_sim/ticks.py: the same numbers)."""
     from gyro_ctl.laws import make_law, make_switching
+
+    from . import ticks
 
     ctl = r.scene.controller
     law = make_law(ctl) if ctl is not None else None
     switching = make_switching(ctl) if ctl is not None and ctl.sampling == "events" else None
+    loop = ticks.tick_loop(r, law) if switching is None else None  # ticks in compiled code where they can be
     clock = CompileClock()
     try:
         with clock:
             while not r.done:
                 if r.row > 0 and law is not None and r.is_control_tick:
                     r.apply_commands(law(r.control_input()))
-                rows = r.advance_located(law, switching) if switching is not None and r.row > 0 else r.advance()
+                rows = (r.advance_located(law, switching) if switching is not None and r.row > 0
+                        else ticks.advance(r, loop))
                 if on_samples is not None and rows.stop > rows.start:
                     on_samples(r.samples(rows))
                     if release:

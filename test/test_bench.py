@@ -201,7 +201,7 @@ def test_bench_smoke(tmp_path):
                       steps_per_turn=(12, 48, 192), rate_changes=(1e-3, 1e-5, 1e-7), spt_ref=768,
                       rtols=(1e-4, 1e-7), rtol_ref=1e-10,
                       mode_horizon=0.05, rtf_duration=0.1, profile=False, min_wall=0.0, max_reps=1,
-                      averaged_scenes=("three_stators",), accuracy=False)
+                      averaged_scenes=("three_stators",), accuracy=False, ticks=False)
     res = run_bench(cfg, tmp_path, command="smoke")
     _check_outputs(tmp_path, ["spinup_thin_shell"])
     assert res.refs[0]["agreement"] < 1e-8
@@ -212,6 +212,27 @@ def test_bench_smoke(tmp_path):
     (a,) = res.averaged
     assert a["models"] == "[K]" and a["averaged"] == a["duration"] and a["error_L"] < 1e-3
     assert "Averaged models" in (tmp_path / "bench.md").read_text()
+
+
+def test_ticks_part_times_both_loops_on_the_same_runs():
+    """The per-tick part (quick): each case with the compiled ticks and the Python break loop (the same run: the
+    same steps), the default scenes also without controller; ratios are CPU ratios of this run; bench.md's table."""
+    from gyro_sim.bench import markdown
+    from gyro_sim.bench_ticks import CASES, ticks_part
+
+    res = Results(BenchConfig(mode="quick", min_wall=0.0, max_reps=1))
+    ticks_part(res, quick=True)
+    cases = [c[0] for c in CASES if c[4]]
+    assert [v["case"] for v in res.ticks] == [c for c in cases for _ in range(3 if "default" in c else 2)]
+    for case in cases:
+        rows = {v["run"]: v for v in res.ticks if v["case"] == case}
+        on, py = rows["controller on, compiled ticks"], rows["controller on, Python break loop"]
+        assert on["steps"] == py["steps"] and py["ratio"] == py["cpu"] / on["cpu"] > 0
+        if "controller off" in rows:
+            assert on["ratio"] == on["cpu"] / rows["controller off"]["cpu"] > 0
+    md = markdown(res)
+    assert "## Control ticks in-process" in md and "with its controller what it costs without" in md
+    assert "against the Python break loop the compiled ticks run `nutation_slow" in md
 
 
 def test_bench_main_refuses_unknown_scene(tmp_path, capsys):

@@ -30,6 +30,7 @@ from gyro_sim.scene import SceneError, load_scene
 from gyro_sim.simulate import stator_triad
 
 from ..config import LAW_NAMES, ControllerConfig, PsiSwitchingParams, SpinupParams, unknown_stators
+from .. import law_kernels
 from ..laws import ControlInput, make_law
 
 #: the laws whose parameters are ROS parameters (the others take theirs from the scene's controller section)
@@ -205,6 +206,7 @@ class ControllerNode(Node):
         if err:
             raise SceneError(err)
         self.cfg, self.law = cfg, make_law(cfg)
+        law_kernels.warm()  # the compiled laws' kernel is loaded now, not at the first tick
         self._next = None  # the config an accepted set puts in force
         self._showing = False  # set while the parameters are being updated to the values in force
         self._show(cfg)
