@@ -7,7 +7,6 @@ record that later code is compared with); ``test_scene_results.py`` runs each sc
 from __future__ import annotations
 
 import json
-import math
 import sys
 import warnings
 from pathlib import Path
