@@ -411,6 +411,12 @@ STEP_ERROR = {
 }
 #: frozen-flow step: the error per turn is about K ε² with ε = rate_change (second order in the step)
 FROZEN_ERROR = {"L": 3e-6, "q": 0.1}
+#: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε³ with ε = rate_change (third order;
+#: calibrated on the quasi-static scenes, docs/accuracy.md)
+QS_FLOW_ERROR = {"order": 3, "L": 1e-3, "q": 1e-1}
+#: the steppers whose knob is ``rate_change`` (the relative change of the body rate a step may make), not
+#: ``steps_per_turn``
+RATE_KNOB = frozenset({"frozen_flow", "qs_flow"})
 #: the tightest attitude tolerance a plan takes, as a fraction of the spin phase Ω T the run can turn through
 #: (rad): the run's phase holds to about 1e-14 of itself in double precision, and an error δ of L relative turns
 #: into δ Ω T of phase; below this a run warns and plans at the floor (docs/accuracy.md)
@@ -420,8 +426,9 @@ STEPS_WARN = 1e8
 #: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
 SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
 SPT_MAX = 100000  # the scene format's limit of steps_per_turn
-#: largest rate_change a plan takes
+#: largest rate_change a plan takes (frozen_flow; qs_flow, whose third order keeps it accurate with longer steps)
 RATE_CHANGE_MAX = 5e-4
+QS_RATE_CHANGE_MAX = 1e-2
 RATE_CHANGE_MIN = 1e-9
 
 
@@ -430,7 +437,8 @@ class StepPlan:
     """The step knobs of a run (:func:`step_plan`): steps per turn of each turn-resolving stepper, the frozen-flow
     ``rate_change``, the turns they were chosen for (``turns``: of the fastest rotation over the run;
     ``free_turns``: of the free rotor's body-frame motion), the step tolerances (``tol_L`` relative, ``tol_q``
-    rad; inf where the attitude is not integrated) and which knobs the scene gave (``explicit``)."""
+    rad; inf where the attitude is not integrated), which knobs the scene gave (``explicit``) and the quasi-static
+    flow step's ``rate_change`` (``qs_rate_change``; the scene's ``rate_change`` where it gives one)."""
 
     steps_per_turn: dict
     rate_change: float
@@ -439,12 +447,22 @@ class StepPlan:
     tol_L: float
     tol_q: float
     explicit: frozenset = frozenset()
+    qs_rate_change: float = RATE_CHANGE_MAX
+
+    def knob(self, method: str) -> float:
+        """The plan's knob of ``method``: ``rate_change`` (:data:`RATE_KNOB`) or ``steps_per_turn``."""
+        if method == "qs_flow":
+            return self.qs_rate_change
+        return self.rate_change if method == "frozen_flow" else self.steps_per_turn[method]
 
     def predicted(self, method: str, knob: Optional[float] = None) -> tuple[float, float]:
         """(L, attitude) errors the model predicts for ``method`` at ``knob`` (default: the plan's)."""
         if method == "frozen_flow":
             eps = self.rate_change if knob is None else knob
             return FROZEN_ERROR["L"] * eps * eps * self.turns, FROZEN_ERROR["q"] * eps * eps * self.turns
+        if method == "qs_flow":
+            f = self.turns * (self.qs_rate_change if knob is None else knob) ** QS_FLOW_ERROR["order"]
+            return QS_FLOW_ERROR["L"] * f, QS_FLOW_ERROR["q"] * f
         m = STEP_ERROR[method]
         spt = self.steps_per_turn[method] if knob is None else knob
         turns = self.free_turns if method == "free" else self.turns
@@ -469,6 +487,15 @@ def _rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
     return max(eps, RATE_CHANGE_MIN)
 
 
+def _qs_rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
+    """The quasi-static flow step's rate_change for the tolerances by :data:`QS_FLOW_ERROR` (K ε³ per turn)."""
+    eps = QS_RATE_CHANGE_MAX
+    for key, tol in (("L", tol_L), ("q", tol_q)):
+        if turns > 0 and math.isfinite(tol):
+            eps = min(eps, (tol / (QS_FLOW_ERROR[key] * turns)) ** (1.0 / QS_FLOW_ERROR["order"]))
+    return max(eps, RATE_CHANGE_MIN)
+
+
 def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) -> StepPlan:
     """The step knobs of a run of T s (:class:`StepPlan`) for the scene's ``accuracy`` (:data:`STEP_SHARE` of it):
     ``omega`` the fastest rate (rad/s) the field steppers resolve over the run, ``omega_free`` the free rotor's
@@ -487,18 +514,20 @@ def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) 
     plan_L = min(tol_L, tol_q / (omega * T)) if omega * T > 0 else tol_L
     spt = {m: _spt_for(m, free_turns if m == "free" else turns, plan_L, 0.5 * tol_q) for m in STEP_ERROR}
     eps = _rate_change_for(turns, plan_L, 0.5 * tol_q)
+    eps_qs = _qs_rate_change_for(turns, plan_L, 0.5 * tol_q)
     integ = scene.integrator
     explicit = set()
     if is_legacy():
         spt, eps = dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE
+        eps_qs = eps
         explicit.add("legacy")
     if integ.steps_per_turn is not None:
         spt = {m: int(integ.steps_per_turn) for m in spt}
         explicit.add("steps_per_turn")
     if integ.rate_change is not None:
-        eps = float(integ.rate_change)
+        eps = eps_qs = float(integ.rate_change)
         explicit.add("rate_change")
-    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit))
+    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit), qs_rate_change=eps_qs)
 
 
 def auto_plan(plan: StepPlan, scene) -> StepPlan:
@@ -508,12 +537,13 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
     if not plan.explicit or "legacy" in plan.explicit:
         return plan if "legacy" not in plan.explicit else StepPlan(
             dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE, plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
-            plan.explicit)
+            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE)
     omT = plan.turns * 2 * math.pi
     plan_L = min(plan.tol_L, plan.tol_q / omT) if omT > 0 else plan.tol_L
     tol = (plan_L, 0.5 * plan.tol_q)
     spt = {m: _spt_for(m, plan.free_turns if m == "free" else plan.turns, *tol) for m in STEP_ERROR}
-    return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q)
+    return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
+                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -521,7 +551,7 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
 # --------------------------------------------------------------------------------------------------
 #: order of each stepper (Richardson: the error of a run is its difference from a run with steps R times longer
 #: over R^p − 1); the free stepper of an axisymmetric or spherical body is exact
-ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8}
+ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8, "qs_flow": QS_FLOW_ERROR["order"]}
 #: ETDRK4 with steps longer than the fastest eddy mode's τ (a stiff step) is far from its order 4: measured on
 #: constant_field (τ = 0.26 ms) its error falls as h^1.4 to h^2 for h from 8 τ to 2 τ (order reduction; Hochbruck &
 #: Ostermann 2005), and the Richardson estimate at order 4 was 6 to 10 times too small. Its stretches are estimated
@@ -529,7 +559,7 @@ ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8}
 STIFF_ORDER = 1
 STIFF = "etdrk4 (stiff)"
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
-SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0}
+SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
 #: early ones catch a plan far off, then every 1/16
 CHECKS = tuple(2.0 ** -k for k in range(12, 4, -1)) + tuple(k / 16 for k in range(1, 16))
@@ -705,6 +735,8 @@ class ErrorControl:
         """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
         if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
             return self.plan.rate_change / RATE_CHANGE_MAX
+        if method == "qs_flow":
+            return SHADOW_RATIO[method] * self.plan.qs_rate_change / QS_RATE_CHANGE_MAX
         div = 1.0
         if method in SPT_MIN:
             div = SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]

@@ -17,9 +17,10 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from . import effects, frozen_flow, kernels
-from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, SHADOW_RATIO, STEPS_WARN, STIFF, ErrorControl, ErrorEstimate,
-                       auto_plan, field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
+from . import effects, frozen_flow, kernels, qs_flow
+from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, STIFF, ErrorControl,
+                       ErrorEstimate, auto_plan, field_rates, is_legacy, mode_plan, spin_reach, step_plan,
+                       truncated_model)
 from .accuracy import warn as accuracy_warning
 from .compile_watch import CompileClock
 from .conductor import DEFAULT_N_MODES
@@ -39,6 +40,10 @@ DEFAULT_RATE_CHANGE = 1e-4
 #: 1.9 µs with one phasor and one mode, 17–28 µs with ten modes (measured on the default scene and
 #: spinup_solid_sphere); ``auto`` takes it where its step is that many times longer
 FROZEN_FLOW_COST = 2.0
+#: a quasi-static flow step (gyro_sim/qs_flow.py: three closed-form passes) costs about this many lawson8 steps
+#: (measured on the default scene's quasi-static variant, docs/numerics.md); ``auto`` takes it on the quasi-static
+#: model where its step is that many times longer than the cheaper of lawson8's and frozen_flow's (in lawson8 steps)
+QS_FLOW_COST = 1.0
 #: control laws that read only t, L and the stators (not q, θ or Ω_b): with one of them (or none) a scene may
 #: run without attitude; any other law (psi_switching, reorient: θ and the polar axis) keeps it
 LAWS_WITHOUT_ATTITUDE = frozenset({"spinup", "off", "hold", "manual"})
@@ -409,6 +414,9 @@ class Simulator:
         if m == "frozen_flow":
             self._check_knob(m)
             return m, self._frozen_flow_step()
+        if m == "qs_flow":
+            self._check_knob(m)
+            return m, self._frozen_flow_step(self.step_plan.qs_rate_change)
         if m == "auto":
             m, h = "lawson8", self._max_step(False, "lawson8")
             held = False
@@ -428,6 +436,9 @@ class Simulator:
                 h_def = self._max_step(False, m, ap.steps_per_turn[m])
                 if held:
                     h_def = min(h_def, self.tau_min)
+                if self._qs_pays(ap, h_def, h_ff):
+                    self._check_knob("qs_flow")
+                    return "qs_flow", self._frozen_flow_step(self.step_plan.qs_rate_change)
                 if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h_def:
                     self._check_knob("frozen_flow")
                     return "frozen_flow", self._frozen_flow_step()
@@ -435,6 +446,15 @@ class Simulator:
             return m, h
         self._check_knob(m)
         return m, self._max_step(False, m)
+
+    def _qs_pays(self, ap, h_def: float, h_ff: float) -> bool:
+        """Whether ``auto`` takes the quasi-static flow step (gyro_sim/qs_flow.py): where it applies and, at the
+        accuracy's own knobs (``ap``), costs less than lawson8/ETDRK4 at step ``h_def`` and frozen_flow at ``h_ff``
+        (s; costs in lawson8 steps: :data:`QS_FLOW_COST`, :data:`FROZEN_FLOW_COST`)."""
+        if is_legacy() or not qs_flow.applies(self.scene, self.J, self.eff[effects.ON] != 0.0):
+            return False
+        h_qs = self._frozen_flow_step(ap.qs_rate_change)
+        return h_qs >= QS_FLOW_COST * min(h_def, h_ff / (FROZEN_FLOW_COST * (1 + self.tau.size)))
 
     def _warn_plan(self, om_plan: float) -> None:
         """Warn where the scene's attitude tolerance is below the floor a plan takes (PHASE_REL_MIN of the spin
@@ -463,7 +483,7 @@ class Simulator:
         used = self.__dict__.setdefault("methods_used", set())
         used.add(method)
         plan = self.step_plan
-        knob = "rate_change" if method == "frozen_flow" else "steps_per_turn"
+        knob = "rate_change" if method in RATE_KNOB else "steps_per_turn"
         if knob not in plan.explicit or method in self._knob_warned or self.quiet:
             return
         if method == "free" and self._free_axis != -1:
@@ -471,8 +491,7 @@ class Simulator:
         self._knob_warned.add(method)
         eL, eq = plan.predicted(method)
         if eL > plan.tol_L or eq > plan.tol_q:
-            want = self._auto_plan.rate_change if method == "frozen_flow" else self._auto_plan.steps_per_turn[method]
-            val = plan.rate_change if method == "frozen_flow" else plan.steps_per_turn[method]
+            want, val = self._auto_plan.knob(method), plan.knob(method)
             acc = self.scene.accuracy
             accuracy_warning(
                 f"scene {self.scene.name!r}: integrator.{knob} = {val:g} cannot meet accuracy (rtol {acc.rtol:g}, "
@@ -563,6 +582,11 @@ class Simulator:
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
                 self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
                 *_case_flag(self.attitude))
+        elif method == "qs_flow":
+            ax = frozen_flow.supported(self.J)
+            k_out, steps = qs_flow.integrate_qs(
+                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
+                self.J[ax], ax, self.c_m, self.w, self.tail, out_y, out_N, k_out, self.eff, *_case_flag(self.attitude))
         elif free:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
@@ -617,8 +641,8 @@ class Simulator:
         a mode is stiff at its step, as :meth:`_step_plan` does)."""
         if method == "free":
             return self._max_step(True, "free")
-        if method == "frozen_flow":
-            return self._frozen_flow_step()
+        if method in RATE_KNOB:
+            return self._frozen_flow_step(self.step_plan.knob(method))
         h = self._max_step(False, method)
         if method == "lawson8" and self.scene.integrator.method == "auto" and h > 2.0 * self.tau_min:
             h = self.tau_min
@@ -995,8 +1019,8 @@ class Runner:
                 if not k or k >= R_MEASURABLE * ctl.shadow_steps.get(m, 0):
                     continue  # (measured)
                 m = "etdrk4" if m == STIFF else m
-                knob = (sim.step_plan.rate_change / sim.step_div if m == "frozen_flow"
-                        else sim.step_plan.steps_per_turn[m] * sim.step_div)
+                knob = (sim.step_plan.knob(m) / sim.step_div if m in RATE_KNOB
+                        else sim.step_plan.knob(m) * sim.step_div)
                 pL, pq = sim.step_plan.predicted(m, knob)
                 sL, sq, how = sL + pL, sq + pq, "richardson+model"
         else:
