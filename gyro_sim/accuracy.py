@@ -338,16 +338,18 @@ class ModePlan:
         return modal_error(self.kind, self.radius, self.sigma, self.thickness, self.n, self.tail, slip)
 
 
-def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bool = False) -> ModePlan:
+def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bool = False,
+              reach: Optional[float] = None) -> ModePlan:
     """The eddy modes a run of ``scene`` over T s (default: its duration) carries, for its ``accuracy``
     (:func:`choose_modes`, :func:`mode_tolerances`); ``attitude``: whether the attitude is integrated (its
-    tolerance then bounds the Im part's error). Warns (:class:`AccuracyWarning`) where an explicit ``modes:``, or
-    :data:`MAX_MODES`, misses the tolerance."""
+    tolerance then bounds the Im part's error); ``reach``: :func:`spin_reach` of the scene over T where the caller
+    has it (rad/s). Warns (:class:`AccuracyWarning`) where an explicit ``modes:``, or :data:`MAX_MODES`, misses
+    the tolerance."""
     T = float(scene.duration if T is None else T)
     cond = scene.rotor.conductor
     acc = scene.accuracy
-    slip = slip_bound(scene, T)
-    om = spin_reach(scene, T)
+    om = spin_reach(scene, T) if reach is None else reach
+    slip = field_rates(scene) + om  # (slip_bound, without a second spin_reach)
     tol_g, tol_im = mode_tolerances(acc.rtol, acc.attitude if attitude else None, om, T)
     att_text = "none" if acc.attitude is None else f"{acc.attitude:g} rad"
     if cond is None or scene.torque_model != "lag" or scene.effects.magnetizable is not None:

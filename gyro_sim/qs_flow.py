@@ -134,38 +134,42 @@ def _sym(M, o0, o1, o2):
 
 
 @njit(cache=True, inline="always")
-def _term(c0, c1, c2, z, ez, h, Op, Epc, need_k, out, K):
-    """Add the term 2 Re(c e^{zσ}) of N (N·m) to out[0:3] (∫0^h) and out[3:6] (∫0^h (h − σ)); with ``need_k`` its
-    halves c e^{zσ} and c̄ e^{z̄σ} times e^{−iΩ_p σ} to K[0] (∫) and K[1] (∫(h − σ)). Epc = e^{−iΩ_p h}."""
-    i1, i2 = _integrals(z, ez, h)
+def _add(c0, c1, c2, i1, i2, out):
+    """Add the term 2 Re(c e^{zσ}) of N (N·m; i1, i2 its ∫0^h e^{zσ}, ∫0^h (h − σ)e^{zσ}) to out[0:3] (∫N) and
+    out[3:6] (∫(h − σ)N)."""
     out[0] += 2.0 * (c0 * i1).real
     out[1] += 2.0 * (c1 * i1).real
     out[2] += 2.0 * (c2 * i1).real
     out[3] += 2.0 * (c0 * i2).real
     out[4] += 2.0 * (c1 * i2).real
     out[5] += 2.0 * (c2 * i2).real
-    if need_k:
-        zs = complex(0.0, -Op)
-        k1, k2 = _integrals(z + zs, ez * Epc, h)
-        m1, m2 = _integrals(z.conjugate() + zs, ez.conjugate() * Epc, h)
-        c0c, c1c, c2c = c0.conjugate(), c1.conjugate(), c2.conjugate()
-        K[0, 0] += c0 * k1 + c0c * m1
-        K[0, 1] += c1 * k1 + c1c * m1
-        K[0, 2] += c2 * k1 + c2c * m1
-        K[1, 0] += c0 * k2 + c0c * m2
-        K[1, 1] += c1 * k2 + c1c * m2
-        K[1, 2] += c2 * k2 + c2c * m2
+
+
+@njit(cache=True, inline="always")
+def _add_k(c0, c1, c2, a1, a2, b1, b2, K):
+    """Add the term c e^{zσ} + c̄ e^{z̄σ} of N seen from the precession (times e^{−iΩ_p σ}) to K[0] (∫) and K[1]
+    (∫(h − σ)): a1, a2 the integrals of e^{(z − iΩ_p)σ}, b1, b2 those of e^{(z̄ − iΩ_p)σ}."""
+    d0, d1, d2 = c0.conjugate(), c1.conjugate(), c2.conjugate()
+    K[0, 0] += c0 * a1 + d0 * b1
+    K[0, 1] += c1 * a1 + d1 * b1
+    K[0, 2] += c2 * a1 + d2 * b1
+    K[1, 0] += c0 * a2 + d0 * b2
+    K[1, 1] += c1 * a2 + d1 * b2
+    K[1, 2] += c2 * a2 + d2 * b2
 
 
 @njit(cache=True)
-def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT, EF, nt, need_k, out, K):
+def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT, EF, nt, need_k, out, K, TI):
     """One pass of the step with L frozen at L̄ = (Lx, Ly, Lz) (case, N·m·s) and the axial moment La (N·m·s: sets
     Ω_r = c_r La, c_r = 1/J_a − 1/J_t in 1/(kg·m²)); x_a the symmetry axis at σ = 0 (case), La0 = L0·x_a. MT, GT:
-    the ripple pairs at the step's start phase, EF[t] = e^{i f_t h}.
+    the ripple pairs at the step's start phase, EF[t] = e^{i f_t h}; TI (nt, 5, 2) complex scratch.
 
     out[0:3] = ∫N dσ, out[3:6] = ∫(h − σ)N dσ (N·m·s, N·m·s²), out[10:13] = l̂, out[13] = Ω_p, out[14] = Ω_r (rad/s),
     out[15] = the step's mean of L·x_a (N·m·s; with ``need_k``); K[0] = ∫N e^{−iΩ_p σ}, K[1] = ∫(h − σ)N e^{−iΩ_p σ}
-    (with ``need_k``)."""
+    (with ``need_k``).
+
+    Every exponent of N and of N e^{−iΩ_p σ} is i(f_t + mΩ_p), m = −2 … 2, or imΩ_p, m = −2 … 2 (the conjugate of
+    a positive one, or 0): their integrals are computed once (TI[t, m + 2], J1, J2) and shared."""
     Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
     if Ln > 0.0:
         l0, l1, l2 = Lx / Ln, Ly / Ln, Lz / Ln
@@ -174,13 +178,25 @@ def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT
     Op = Ln / Jt
     Or = c_r * La
     Ep = complex(math.cos(Op * h), math.sin(Op * h))
-    Epc = Ep.conjugate()
+    wob = Or != 0.0
+    # the integrals of e^{i(f_t + mΩ_p)σ}: m = −1, 0, 1 for N; −2 … 2 for N e^{−iΩ_p σ}
+    mlo, mhi = (-2, 3) if need_k else ((-1, 2) if wob else (0, 1))
+    for t in range(nt):
+        f = FT[t]
+        ez = EF[t]
+        for _ in range(-mlo):
+            ez = ez * Ep.conjugate()
+        for m in range(mlo, mhi):
+            i1, i2 = _integrals(complex(0.0, f + m * Op), ez, h)
+            TI[t, m + 2, 0] = i1
+            TI[t, m + 2, 1] = i2
+            ez = ez * Ep
+    j11, j12 = _integrals(complex(0.0, Op), Ep, h)  # e^{iΩ_p σ}
     # Ω(σ) = o0 + 2 Re(o1 e^{iΩ_p σ}) (case frame, rad/s)
     d = l0 * xa0 + l1 * xa1 + l2 * xa2
     o0, o1, o2 = (Op + Or * d) * l0, (Op + Or * d) * l1, (Op + Or * d) * l2
     p0, p1, p2 = _proj(1, l0, l1, l2, xa0 + 0j, xa1 + 0j, xa2 + 0j)
     p0, p1, p2 = Or * p0, Or * p1, Or * p2
-    wob = Or != 0.0
     # the constant C0 = k_e (M0 o0 + g0)
     c0, c1, c2 = _sym(M0, o0, o1, o2)
     c0, c1, c2 = k_e * (c0 + g0[0]), k_e * (c1 + g0[1]), k_e * (c2 + g0[2])
@@ -188,23 +204,36 @@ def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT
     hh = 0.5 * h * h
     out[3], out[4], out[5] = c0 * hh, c1 * hh, c2 * hh
     if need_k:  # C0 e^{−iΩ_p σ}
-        k1, k2 = _integrals(complex(0.0, -Op), Epc, h)
+        k1, k2 = j11.conjugate(), j12.conjugate()
         K[0, 0], K[0, 1], K[0, 2] = c0 * k1, c1 * k1, c2 * k1
         K[1, 0], K[1, 1], K[1, 2] = c0 * k2, c1 * k2, c2 * k2
     if wob:  # k_e M0 o1 e^{iΩ_p σ}
         a0, a1, a2 = _sym(M0, p0, p1, p2)
-        _term(k_e * a0, k_e * a1, k_e * a2, complex(0.0, Op), Ep, h, Op, Epc, need_k, out, K)
+        a0, a1, a2 = k_e * a0, k_e * a1, k_e * a2
+        _add(a0, a1, a2, j11, j12, out)
+        if need_k:
+            j21, j22 = _integrals(complex(0.0, 2.0 * Op), Ep * Ep, h)
+            _add_k(a0, a1, a2, h + 0j, hh + 0j, j21.conjugate(), j22.conjugate(), K)
     for t in range(nt):
         M = MT[t]
-        f = FT[t]
         a0, a1, a2 = _sym(M, o0 + 0j, o1 + 0j, o2 + 0j)
-        _term(k_e * (a0 + GT[t, 0]), k_e * (a1 + GT[t, 1]), k_e * (a2 + GT[t, 2]), complex(0.0, f), EF[t], h, Op,
-              Epc, need_k, out, K)
+        a0, a1, a2 = k_e * (a0 + GT[t, 0]), k_e * (a1 + GT[t, 1]), k_e * (a2 + GT[t, 2])
+        _add(a0, a1, a2, TI[t, 2, 0], TI[t, 2, 1], out)
+        if need_k:
+            _add_k(a0, a1, a2, TI[t, 1, 0], TI[t, 1, 1], TI[t, 3, 0].conjugate(), TI[t, 3, 1].conjugate(), K)
         if wob:
-            a0, a1, a2 = _sym(M, p0, p1, p2)
-            _term(k_e * a0, k_e * a1, k_e * a2, complex(0.0, f + Op), EF[t] * Ep, h, Op, Epc, need_k, out, K)
-            a0, a1, a2 = _sym(M, p0.conjugate(), p1.conjugate(), p2.conjugate())
-            _term(k_e * a0, k_e * a1, k_e * a2, complex(0.0, f - Op), EF[t] * Epc, h, Op, Epc, need_k, out, K)
+            for sg in range(2):  # k_e M_t o1 at f_t + Ω_p, k_e M_t ō1 at f_t − Ω_p
+                if sg == 0:
+                    a0, a1, a2 = _sym(M, p0, p1, p2)
+                    m = 1
+                else:
+                    a0, a1, a2 = _sym(M, p0.conjugate(), p1.conjugate(), p2.conjugate())
+                    m = -1
+                a0, a1, a2 = k_e * a0, k_e * a1, k_e * a2
+                _add(a0, a1, a2, TI[t, m + 2, 0], TI[t, m + 2, 1], out)
+                if need_k:
+                    _add_k(a0, a1, a2, TI[t, m + 1, 0], TI[t, m + 1, 1], TI[t, m + 3, 0].conjugate(),
+                           TI[t, m + 3, 1].conjugate(), K)
     out[10], out[11], out[12] = l0, l1, l2
     out[13], out[14] = Op, Or
     if need_k:
@@ -216,11 +245,11 @@ def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT
 
 
 @njit(cache=True)
-def qs_flow_step(y, s, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF, out, K, case):
+def qs_flow_step(y, s, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF, out, K, TI, case):
     """One step of length h (s) from phase time s (s since the segment's start) of the quasi-static flow step, in
     place on y (L case N·m·s, q body → case; y[3:7] untouched with ``case``: an isotropic rotor without attitude,
     J = Jt). M0, g0, MT0, GT0, FT, nt: :func:`field_pairs`; MT, GT, EF: scratch (nt, ·) complex; out (16,), K (2, 3)
-    complex. See the module docstring."""
+    complex, TI (nt, 5, 2) complex. See the module docstring."""
     for t in range(nt):  # the ripple pairs' phase at the step's start, and over the step
         ph = complex(math.cos(FT[t] * s), math.sin(FT[t] * s))
         EF[t] = complex(math.cos(FT[t] * h), math.sin(FT[t] * h))
@@ -241,17 +270,17 @@ def qs_flow_step(y, s, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF,
         c_r = 1.0 / Ja - 1.0 / Jt
         need = c_r != 0.0  # (Ω_r enters the torque: its mean is needed at every pass)
     La0 = Lx * xa0 + Ly * xa1 + Lz * xa2
-    _qs_pass(Lx, Ly, Lz, La0, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT, EF, nt, need, out, K)
+    _qs_pass(Lx, Ly, Lz, La0, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT, EF, nt, need, out, K, TI)
     a0, a1, a2, la1 = out[3], out[4], out[5], out[15]
     _qs_pass(Lx + a0 / h, Ly + a1 / h, Lz + a2 / h, la1, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT,
-             EF, nt, need, out, K)
+             EF, nt, need, out, K, TI)
     # the mean of L over the step to O(h³): (I2_1 + 2 I2_2)/(3h) (module docstring); the mean axial moment alike
     b0 = (a0 + 2.0 * out[3]) / (3.0 * h)
     b1 = (a1 + 2.0 * out[4]) / (3.0 * h)
     b2 = (a2 + 2.0 * out[5]) / (3.0 * h)
     la = (la1 + 2.0 * out[15]) / 3.0 if need else La0
     _qs_pass(Lx + b0, Ly + b1, Lz + b2, la, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT, EF, nt,
-             not case, out, K)
+             not case, out, K, TI)
     y[0] = Lx + out[0]
     y[1] = Ly + out[1]
     y[2] = Lz + out[2]
@@ -323,6 +352,7 @@ def integrate_qs(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, J
     MT = np.empty((max(nt, 1), 6), np.complex128)
     GT = np.empty((max(nt, 1), 3), np.complex128)
     EF = np.empty(max(nt, 1), np.complex128)
+    TI = np.empty((max(nt, 1), 5, 2), np.complex128)
     out = np.zeros(16)
     K = np.zeros((2, 3), np.complex128)
     k_e = c_m * tail
@@ -338,7 +368,7 @@ def integrate_qs(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, J
             k, h = _equal_steps(span, h_max)
             for j in range(k):
                 qs_flow_step(y, (t - t_seg) + j * h, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF, out,
-                             K, case is not None)
+                             K, TI, case is not None)
             steps += k
             t = t_stops[i]
         if record[i]:

@@ -83,15 +83,20 @@ def _case_flag(attitude: bool) -> tuple:
 
 
 def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u."""
-    u = np.asarray(u, dtype=float)
-    u = u / np.linalg.norm(u)
-    i = int(np.argmax(np.abs(u)))
-    z = np.zeros(3)
+    """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u. (Scalar code: a
+    Simulator makes one per stator, and np.cross costs ~5 µs a call.)"""
+    a = [float(v) for v in u]
+    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    u0, u1, u2 = a[0] / n, a[1] / n, a[2] / n
+    i = max(range(3), key=lambda k: abs((u0, u1, u2)[k]))  # (the first of equal ones, as np.argmax)
+    z = [0.0, 0.0, 0.0]
     z[(i + 1) % 3] = 1.0
-    e1 = z - np.dot(z, u) * u
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(u, e1), u
+    d = z[0] * u0 + z[1] * u1 + z[2] * u2
+    e = [z[0] - d * u0, z[1] - d * u1, z[2] - d * u2]
+    m = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    e0, e1, e2 = e[0] / m, e[1] / m, e[2] / m
+    return (np.array([e0, e1, e2]), np.array([u1 * e2 - u2 * e1, u2 * e0 - u0 * e2, u0 * e1 - u1 * e0]),
+            np.array([u0, u1, u2]))
 
 
 @dataclass
@@ -241,7 +246,8 @@ class Simulator:
         # the run's accuracy plan (gyro_sim/accuracy.py): made for ``horizon`` s (default: the scene's duration),
         # the same in-process and in the ROS node
         self.horizon = float(scene.duration if horizon is None else horizon)
-        self.mode_plan = mode_plan(scene, self.horizon, self.attitude, quiet=quiet)
+        om_reach = spin_reach(scene, self.horizon)  # the fastest spin the run can reach (rad/s)
+        self.mode_plan = mode_plan(scene, self.horizon, self.attitude, quiet=quiet, reach=om_reach)
         self.slip_met = 0.0  # largest slip bound met at a step plan (rad/s): the modes' error is judged there
         self._slip_warned = False
         # --- eddy-current model (physics.md §3)
@@ -310,7 +316,8 @@ class Simulator:
         self.t = 0.0
         self._seg, self._seg_t_end = None, math.nan  # see _segment
         # the fields are switched on at t = 0 on a rotor free of eddy currents
-        self._field_step(np.zeros(3), self.field_now())
+        if self.tau.size:
+            self._field_step(np.zeros(3), self.field_now())
         self.steps = 0
         # free-rotor geometry: reference inertia and the axis carrying H_r
         if J[0] == J[1] == J[2]:
@@ -329,7 +336,6 @@ class Simulator:
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
         # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/accuracy.py): turns of the fastest
         # rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body motion
-        om_reach = spin_reach(scene, self.horizon)
         Lmag0 = float(np.linalg.norm(self.y[0:3]))
         om_plan = max(om_reach, field_rates(scene), self._effect_rate())
         L_bound = Lmag0 if om_reach <= Lmag0 * float(np.max(self.Jinv)) * (1 + 1e-12) else float(np.max(J)) * om_reach
@@ -384,7 +390,17 @@ class Simulator:
         self.y[7:7 + 3 * self.tau.size] -= np.tile(dBb, self.tau.size)
 
     def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T)."""
+        """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T). Kept while the time,
+        currents, rates and phases are the same (a run asks for them at its start, its first sample and its step
+        plan): read them, do not write into them."""
+        key = (self.t, self.current.tobytes(), self.rate.tobytes(), self.phase.tobytes())
+        kept = self.__dict__.get("_ph")
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        self._ph = (key, self._phasors())
+        return self._ph[1]
+
+    def _phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         on = self.current > 0
         c, s = np.cos(self.phase[on]), np.sin(self.phase[on])
         amp = (self.b * self.current)[on][:, None]
@@ -507,7 +523,7 @@ class Simulator:
         """Largest lawson8/etdrk4/free step (s) at ``spt`` steps per turn (default: the step plan's: the scene's
         knob, else chosen for its accuracy) of the fastest rotation, bounded by ``integrator.max_step``."""
         spt = spt or self.step_plan.steps_per_turn[method]
-        L = np.linalg.norm(self.y[0:3])
+        L = math.sqrt(float(self.y[0]) ** 2 + float(self.y[1]) ** 2 + float(self.y[2]) ** 2)
         if free:
             if self._free_axis != -1:
                 h = math.inf  # the free step is exact
@@ -515,8 +531,7 @@ class Simulator:
                 rate = L * np.max(np.abs(self.Jinv - self._inv_ref))
                 h = 2 * math.pi / (spt * rate) if rate > 0 else math.inf
         else:
-            om = max(L * np.max(self.Jinv), self._nu_max, float(np.max(self.field_om, initial=0.0)),
-                     self._effect_rate())
+            om = max(L * max(self.Jinv), self._nu_max, max(self.field_om, default=0.0), self._effect_rate())
             h = 2 * math.pi / (spt * om) if om > 0 else math.inf
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
@@ -528,15 +543,28 @@ class Simulator:
         |m||B| the conductor gives at a slip up to Ω + ν_max (J_min Ω ε / N); ε = ``eps``, else the scene's
         ``integrator.rate_change``, else the one chosen for the scene's accuracy (``step_plan``)."""
         eps = eps or self.step_plan.rate_change
+        h = eps * self._torque_time()
+        if self.scene.integrator.max_step is not None:
+            h = min(h, self.scene.integrator.max_step)
+        return h
+
+    def _torque_time(self) -> float:
+        """J_min Ω / N (s): the time the torque's scale N (:meth:`_frozen_flow_step`) takes to change the fastest
+        rate Ω by itself (inf without torque or rate); kept while the commands, the rates met and L are the same
+        (a step plan asks for it for several knobs)."""
+        key = (self.current.tobytes(), self.rate.tobytes(), self._nu_max, float(self.y[0]), float(self.y[1]),
+               float(self.y[2]))
+        kept = self.__dict__.get("_tt")
+        if kept is not None and kept[0] == key:
+            return kept[1]
         Bre, Bim, _ = self.phasors()
         B = float(np.sum(np.sqrt(np.sum(Bre ** 2, axis=1) + np.sum(Bim ** 2, axis=1))))
         om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
                  float(np.max(np.abs(self.field_om), initial=0.0)))
         N = self.c_m * B * B * (0.5 * float(np.sum(np.abs(self.w))) + self.tail * (om + self._nu_max))
-        h = eps * float(np.min(self.J)) * om / N if N > 0 and om > 0 else math.inf
-        if self.scene.integrator.max_step is not None:
-            h = min(h, self.scene.integrator.max_step)
-        return h
+        tt = float(np.min(self.J)) * om / N if N > 0 and om > 0 else math.inf
+        self._tt = (key, tt)
+        return tt
 
     def _effect_rate(self) -> float:
         """Fastest rate (rad/s) an effect brings: the body rate the flywheel drives, the damper's spring."""
