@@ -413,9 +413,10 @@ STEP_ERROR = {
 }
 #: frozen-flow step: the error per turn is about K ε² with ε = rate_change (second order in the step)
 FROZEN_ERROR = {"L": 3e-6, "q": 0.1}
-#: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε³ with ε = rate_change (third order;
-#: calibrated on the quasi-static scenes, docs/accuracy.md)
-QS_FLOW_ERROR = {"order": 3, "L": 1e-3, "q": 1e-1}
+#: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε² with ε = rate_change, K the
+#: frozen-flow step's: at equal rate_change its errors were never larger than the frozen-flow step's on the
+#: quasi-static scenes (the same in L, far smaller in the attitude of a spin-up: third order there), docs/accuracy.md
+QS_FLOW_ERROR = {"order": 2, "L": FROZEN_ERROR["L"], "q": FROZEN_ERROR["q"]}
 #: the steppers whose knob is ``rate_change`` (the relative change of the body rate a step may make), not
 #: ``steps_per_turn``
 RATE_KNOB = frozenset({"frozen_flow", "qs_flow"})
@@ -428,7 +429,7 @@ STEPS_WARN = 1e8
 #: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
 SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
 SPT_MAX = 100000  # the scene format's limit of steps_per_turn
-#: largest rate_change a plan takes (frozen_flow; qs_flow, whose third order keeps it accurate with longer steps)
+#: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
 RATE_CHANGE_MAX = 5e-4
 QS_RATE_CHANGE_MAX = 1e-2
 RATE_CHANGE_MIN = 1e-9
@@ -490,7 +491,7 @@ def _rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
 
 
 def _qs_rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
-    """The quasi-static flow step's rate_change for the tolerances by :data:`QS_FLOW_ERROR` (K ε³ per turn)."""
+    """The quasi-static flow step's rate_change for the tolerances by :data:`QS_FLOW_ERROR` (K ε^order per turn)."""
     eps = QS_RATE_CHANGE_MAX
     for key, tol in (("L", tol_L), ("q", tol_q)):
         if turns > 0 and math.isfinite(tol):
