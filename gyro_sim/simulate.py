@@ -1005,10 +1005,13 @@ class Runner:
         if not sel.size:
             return
         r = slice(rows.start, rows.start + sel.size)
-        dt = np.diff(np.concatenate([[self._last_t], sel]))
-        N = np.linalg.norm(self.out_N[r], axis=1)
         Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
         self.control.note_L(float(np.max(Ln)))
+        if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
+            self._last_t = float(sel[-1])
+            return
+        dt = np.diff(np.concatenate([[self._last_t], sel]))
+        N = np.linalg.norm(self.out_N[r], axis=1)
         om = Ln * float(np.max(self.sim.Jinv))
         # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
         self._impulse = float(np.cumsum(np.concatenate([[self._impulse], N * dt]))[-1])
