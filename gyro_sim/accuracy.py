@@ -184,7 +184,7 @@ def spin_reach(scene, T: float) -> float:
         r1 = cond.inner_radius
         N *= shell_tau_eff(r1, cond.outer_radius, cond.conductivity) * (om0 + 2 * nu)
     by_torque = om0 + N * T / float(np.min(J))
-    axes = {tuple(np.round(np.abs(s.axis), 12)) for s in active_stators(scene)}
+    axes = {tuple(round(abs(float(v)), 12) for v in s.axis) for s in active_stators(scene)}
     several = len(axes) > 1 or bool(scene.field)
     by_rate = max(om0, (2.0 if several else 1.0) * nu * float(np.max(J) / np.min(J)))
     return min(by_torque, by_rate)

@@ -552,12 +552,15 @@ class Simulator:
         kept = self.__dict__.get("_tt")
         if kept is not None and kept[0] == key:
             return kept[1]
-        Bre, Bim, _ = self.phasors()
-        B = float(np.sum(np.sqrt(np.sum(Bre ** 2, axis=1) + np.sum(Bim ** 2, axis=1))))
-        om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
-                 float(np.max(np.abs(self.field_om), initial=0.0)))
-        N = self.c_m * B * B * (0.5 * float(np.sum(np.abs(self.w))) + self.tail * (om + self._nu_max))
-        tt = float(np.min(self.J)) * om / N if N > 0 and om > 0 else math.inf
+        # |B| summed over the phasors: √2 b_k I_k a stator (its Bre, Bim are b_k I_k times two orthonormal vectors),
+        # |B_p| a general field term (scalar code: this is asked once per command segment)
+        B = sum(math.sqrt(2.0) * b * c for b, c in zip(self.b.tolist(), self.current.tolist()) if c > 0)
+        B += sum(float(np.linalg.norm(f)) for f in self.field_B) if self.field_B.size else 0.0
+        y = self.y
+        om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * max(self.Jinv.tolist()),
+                 self._nu_max, max((abs(f) for f in self.field_om.tolist()), default=0.0))
+        N = self.c_m * B * B * (0.5 * sum(abs(v) for v in self.w.tolist()) + self.tail * (om + self._nu_max))
+        tt = min(self.J.tolist()) * om / N if N > 0 and om > 0 else math.inf
         self._tt = (key, tt)
         return tt
 
