@@ -113,27 +113,9 @@ def euler_angles(R: np.ndarray, L: np.ndarray) -> np.ndarray:
 
 
 def attitude_from_euler(L_direction: np.ndarray, psi: float, theta: float, phi: float) -> np.ndarray:
-    """Quaternion (body → case, w ≥ 0) of the body at Euler angles (ψ, θ, φ) in the L-frame of a direction:
-    R = Y Rz(ψ) Rx(θ) Rz(φ) with Y = Rz(σ) Ry(ρ) (:func:`l_frame`: ρ, σ the polar angle and azimuth of the
-    direction), as the product of the five rotations' quaternions. Scalar code (a simulator makes one at its
-    start; the matrix route cost ~15 µs)."""
-    x, y, z = (float(v) for v in np.ravel(L_direction))
-    h = math.hypot(x, y)
-    rho = math.atan2(h, z)
-    sig = math.atan2(y, x) if h > 0.0 else 0.0  # (L ∥ ±z3: σ = 0, as l_frame)
-    w, v = 1.0, [0.0, 0.0, 0.0]
-    for axis, a in ((2, sig), (1, rho), (2, psi), (0, theta), (2, phi)):
-        c, s = math.cos(0.5 * a), math.sin(0.5 * a)
-        u = [0.0, 0.0, 0.0]
-        u[axis] = s
-        # (w, v) ⊗ (c, u)
-        w, v = (w * c - (v[0] * u[0] + v[1] * u[1] + v[2] * u[2]),
-                [w * u[0] + c * v[0] + v[1] * u[2] - v[2] * u[1], w * u[1] + c * v[1] + v[2] * u[0] - v[0] * u[2],
-                 w * u[2] + c * v[2] + v[0] * u[1] - v[1] * u[0]])
-    q = np.array([w, v[0], v[1], v[2]])
-    if q[0] < 0:
-        q = -q
-    return q / np.linalg.norm(q)
+    """Quaternion (body → case) of the body at Euler angles (ψ, θ, φ) in the L-frame of a direction."""
+    Y = l_frame(np.asarray(L_direction, dtype=float))
+    return matrix_to_quat(Y @ rot_z(psi) @ rot_x(theta) @ rot_z(phi))
 
 
 def nutation_angle(q: np.ndarray, L: np.ndarray) -> float:
