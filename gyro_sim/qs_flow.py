@@ -159,7 +159,7 @@ def _add_k(c0, c1, c2, a1, a2, b1, b2, K, both):
     K[1, 2] += c2 * a2 + d2 * b2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT, FT, EF, nt, need_k, final, out, K,
              TI):
     """One pass of the step with L frozen at L̄ = (Lx, Ly, Lz) (case, N·m·s) and the axial moment La (N·m·s: sets
@@ -265,7 +265,7 @@ def _integrals3(z, ez, h):
     return i1, (i1 - h) * r, (h * ez - i1) * r - 0.5 * h * i1  # ∫σ e^{zσ} = (h e^{zh} − I1)/z
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _drift_ripple(D0, D1, D2, h, Jt, c_r, k_e, xa0, xa1, xa2, out, M0, MT, nt, TI):
     """The part of ΔL = ∫N dσ (N·m·s) that a pass with L frozen misses where L drifts at D = (D0, D1, D2) (N·m) over
     the step while the field's ripple and the axis's precession modulate the torque's slope in L:
