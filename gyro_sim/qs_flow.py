@@ -195,7 +195,8 @@ def _qs_pass(Lx, Ly, Lz, La, La0, xa0, xa1, xa2, h, Jt, c_r, k_e, M0, g0, MT, GT
             i1, i2, w = _integrals3(complex(0.0, f + m * Op), ez, h)
             TI[t, m + 2, 0] = i1
             TI[t, m + 2, 1] = i2
-            TI[t, m + 2, 2] = w
+            if final:  # (the moments: the drift-ripple term's, after the last pass)
+                TI[t, m + 2, 2] = w
             ez = ez * Ep
     j11, j12 = _integrals(complex(0.0, Op), Ep, h)  # e^{iΩ_p σ}
     # Ω(σ) = o0 + 2 Re(o1 e^{iΩ_p σ}) (case frame, rad/s)
