@@ -1,4 +1,4 @@
-"""The quasi-static flow step (``qs_flow``): steps of many field turns for the quasi-static torque, third order.
+"""The quasi-static flow step (``qs_flow``): steps of many field turns for the quasi-static torque.
 
 The frozen-flow step (:mod:`gyro_sim.frozen_flow`) moves the rotor over a step [0, h] by the exact torque-free
 motion of an axisymmetric body with L frozen at its mean L̄, and integrates the torque along that motion in closed
@@ -37,10 +37,17 @@ J_N N̄ h³/6 of it and pass 2 has J_N N̄ h³/4 too much (its L̄ is the mean f
 
 is right to O(h³) per step (and the mean of L_b·e_a, which sets Ω_r, by the same weights). Pass 3 with L̄* gives
 ΔL = ∫N dσ and the attitude: the flow's R(h) = Rot(l̂, Ω_p h) R0 Rot(e_a, Ω_r h), turned by the least rotation that
-takes R(h) L_b(h) onto L(h), L_b(h) by variation of constants as in frozen_flow.frozen_flow_step. The spin phase is
-then right to third order: measured on the default scene's quasi-static variant over 2 s (no controller, against
-lawson8 at 3072 steps per turn), 100 steps (h = 20 ms, 10 field turns and up to 0.3 spin turns a step): 1.1e-8
-where the frozen-flow step gives 4.2e-5 (docs/accuracy.md, docs/benchmark.md).
+takes R(h) L_b(h) onto L(h), L_b(h) by variation of constants as in frozen_flow.frozen_flow_step.
+
+*The drift-ripple term.* A pass freezes L, but L drifts over the step (D = ΔL/h) while the field's ripple and the
+axis's precession modulate the torque's slope in L: ΔL misses k_e ∫(σ − h/2) M(σ) K(σ) D dσ, K = ∂Ω/∂L =
+I/J_t + c_r x_a x_aᵀ (:func:`_drift_ripple`), about |M̃ K D| h/f a step, which adds up where the step is a multiple
+of the ripple's period (the 50 Hz samples of a 500 Hz field). It is added to the last pass's ΔL.
+
+Measured on the default scene's quasi-static variant over 2 s (no controller, against lawson8 at 3072 steps per
+turn), 100 steps (h = 20 ms, 10 field turns and up to 0.3 spin turns a step): 2.4e-10 in L, 1.2e-8 rad, where the
+frozen-flow step gives 1.35e-8 and 4.2e-5 rad. The spin phase is third order on a spin-up (8x a halving); where the
+ripple acts on a turning L the step is second order (docs/accuracy.md, docs/numerics.md, docs/benchmark.md).
 
 Where it applies: the quasi-static torque model, an axisymmetric or isotropic rotor (frozen_flow.supported), no
 effect of physics.md §4; an isotropic rotor without attitude takes the case-frame form (L alone: Ω = L/J).
@@ -55,10 +62,7 @@ from numba import njit
 from .frozen_flow import _integrals, _proj
 from .kernels import _equal_steps, _rotl, record_sample
 
-__all__ = ["applies", "integrate_qs", "qs_flow_step", "field_pairs", "N_PASSES"]
-
-#: closed-form passes a step makes (the third at the corrected mean L̄*)
-N_PASSES = 3
+__all__ = ["applies", "integrate_qs", "qs_flow_step", "field_pairs"]
 
 
 def applies(scene, J: np.ndarray, effects_on: bool) -> bool:
