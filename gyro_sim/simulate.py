@@ -474,8 +474,8 @@ class Simulator:
         on the quasi-static torque model (not in the old defaults' runs, gyro_sim.accuracy.legacy). Its step is as
         long (the same error model), costs a third (0.8 µs against 2.3 µs, one phasor), and its error measured no
         larger on every quasi-static scene (docs/numerics.md). Where frozen_flow does not pay, lawson8 stays: its
-        error is the predictable one (it resolves the field's ripple), and on reorient_L a qs_flow chosen by cost
-        alone (0.55 lawson8 steps a step) took 3.6 million steps against lawson8's 10 000."""
+        error is the predictable one (it resolves the field's ripple): on reorient_L qs_flow takes 403 699 steps
+        (2.6 s CPU) against lawson8's 10 319 (0.18 s), docs/accuracy.md."""
         return not is_legacy() and qs_flow.applies(self.scene, self.J, self.eff[effects.ON] != 0.0)
 
     def _warn_plan(self, om_plan: float) -> None:
