@@ -184,7 +184,7 @@ def spin_reach(scene, T: float) -> float:
         r1 = cond.inner_radius
         N *= shell_tau_eff(r1, cond.outer_radius, cond.conductivity) * (om0 + 2 * nu)
     by_torque = om0 + N * T / float(np.min(J))
-    axes = {tuple(np.round(np.abs(s.axis), 12)) for s in active_stators(scene)}
+    axes = {tuple(round(abs(float(v)), 12) for v in s.axis) for s in active_stators(scene)}
     several = len(axes) > 1 or bool(scene.field)
     by_rate = max(om0, (2.0 if several else 1.0) * nu * float(np.max(J) / np.min(J)))
     return min(by_torque, by_rate)
@@ -338,16 +338,18 @@ class ModePlan:
         return modal_error(self.kind, self.radius, self.sigma, self.thickness, self.n, self.tail, slip)
 
 
-def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bool = False) -> ModePlan:
+def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bool = False,
+              reach: Optional[float] = None) -> ModePlan:
     """The eddy modes a run of ``scene`` over T s (default: its duration) carries, for its ``accuracy``
     (:func:`choose_modes`, :func:`mode_tolerances`); ``attitude``: whether the attitude is integrated (its
-    tolerance then bounds the Im part's error). Warns (:class:`AccuracyWarning`) where an explicit ``modes:``, or
-    :data:`MAX_MODES`, misses the tolerance."""
+    tolerance then bounds the Im part's error); ``reach``: :func:`spin_reach` of the scene over T where the caller
+    has it (rad/s). Warns (:class:`AccuracyWarning`) where an explicit ``modes:``, or :data:`MAX_MODES`, misses
+    the tolerance."""
     T = float(scene.duration if T is None else T)
     cond = scene.rotor.conductor
     acc = scene.accuracy
-    slip = slip_bound(scene, T)
-    om = spin_reach(scene, T)
+    om = spin_reach(scene, T) if reach is None else reach
+    slip = field_rates(scene) + om  # (slip_bound, without a second spin_reach)
     tol_g, tol_im = mode_tolerances(acc.rtol, acc.attitude if attitude else None, om, T)
     att_text = "none" if acc.attitude is None else f"{acc.attitude:g} rad"
     if cond is None or scene.torque_model != "lag" or scene.effects.magnetizable is not None:
@@ -411,6 +413,13 @@ STEP_ERROR = {
 }
 #: frozen-flow step: the error per turn is about K ε² with ε = rate_change (second order in the step)
 FROZEN_ERROR = {"L": 3e-6, "q": 0.1}
+#: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε² with ε = rate_change, K the
+#: frozen-flow step's: at equal rate_change its errors were never larger than the frozen-flow step's on the
+#: quasi-static scenes (the same in L, far smaller in the attitude of a spin-up: third order there), docs/accuracy.md
+QS_FLOW_ERROR = {"order": 2, "L": FROZEN_ERROR["L"], "q": FROZEN_ERROR["q"]}
+#: the steppers whose knob is ``rate_change`` (the relative change of the body rate a step may make), not
+#: ``steps_per_turn``
+RATE_KNOB = frozenset({"frozen_flow", "qs_flow"})
 #: the tightest attitude tolerance a plan takes, as a fraction of the spin phase Ω T the run can turn through
 #: (rad): the run's phase holds to about 1e-14 of itself in double precision, and an error δ of L relative turns
 #: into δ Ω T of phase; below this a run warns and plans at the floor (docs/accuracy.md)
@@ -420,8 +429,9 @@ STEPS_WARN = 1e8
 #: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
 SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
 SPT_MAX = 100000  # the scene format's limit of steps_per_turn
-#: largest rate_change a plan takes
+#: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
 RATE_CHANGE_MAX = 5e-4
+QS_RATE_CHANGE_MAX = 1e-2
 RATE_CHANGE_MIN = 1e-9
 
 
@@ -430,7 +440,8 @@ class StepPlan:
     """The step knobs of a run (:func:`step_plan`): steps per turn of each turn-resolving stepper, the frozen-flow
     ``rate_change``, the turns they were chosen for (``turns``: of the fastest rotation over the run;
     ``free_turns``: of the free rotor's body-frame motion), the step tolerances (``tol_L`` relative, ``tol_q``
-    rad; inf where the attitude is not integrated) and which knobs the scene gave (``explicit``)."""
+    rad; inf where the attitude is not integrated), which knobs the scene gave (``explicit``) and the quasi-static
+    flow step's ``rate_change`` (``qs_rate_change``; the scene's ``rate_change`` where it gives one)."""
 
     steps_per_turn: dict
     rate_change: float
@@ -439,12 +450,22 @@ class StepPlan:
     tol_L: float
     tol_q: float
     explicit: frozenset = frozenset()
+    qs_rate_change: float = RATE_CHANGE_MAX
+
+    def knob(self, method: str) -> float:
+        """The plan's knob of ``method``: ``rate_change`` (:data:`RATE_KNOB`) or ``steps_per_turn``."""
+        if method == "qs_flow":
+            return self.qs_rate_change
+        return self.rate_change if method == "frozen_flow" else self.steps_per_turn[method]
 
     def predicted(self, method: str, knob: Optional[float] = None) -> tuple[float, float]:
         """(L, attitude) errors the model predicts for ``method`` at ``knob`` (default: the plan's)."""
         if method == "frozen_flow":
             eps = self.rate_change if knob is None else knob
             return FROZEN_ERROR["L"] * eps * eps * self.turns, FROZEN_ERROR["q"] * eps * eps * self.turns
+        if method == "qs_flow":
+            f = self.turns * (self.qs_rate_change if knob is None else knob) ** QS_FLOW_ERROR["order"]
+            return QS_FLOW_ERROR["L"] * f, QS_FLOW_ERROR["q"] * f
         m = STEP_ERROR[method]
         spt = self.steps_per_turn[method] if knob is None else knob
         turns = self.free_turns if method == "free" else self.turns
@@ -469,6 +490,15 @@ def _rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
     return max(eps, RATE_CHANGE_MIN)
 
 
+def _qs_rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
+    """The quasi-static flow step's rate_change for the tolerances by :data:`QS_FLOW_ERROR` (K ε^order per turn)."""
+    eps = QS_RATE_CHANGE_MAX
+    for key, tol in (("L", tol_L), ("q", tol_q)):
+        if turns > 0 and math.isfinite(tol):
+            eps = min(eps, (tol / (QS_FLOW_ERROR[key] * turns)) ** (1.0 / QS_FLOW_ERROR["order"]))
+    return max(eps, RATE_CHANGE_MIN)
+
+
 def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) -> StepPlan:
     """The step knobs of a run of T s (:class:`StepPlan`) for the scene's ``accuracy`` (:data:`STEP_SHARE` of it):
     ``omega`` the fastest rate (rad/s) the field steppers resolve over the run, ``omega_free`` the free rotor's
@@ -487,18 +517,20 @@ def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) 
     plan_L = min(tol_L, tol_q / (omega * T)) if omega * T > 0 else tol_L
     spt = {m: _spt_for(m, free_turns if m == "free" else turns, plan_L, 0.5 * tol_q) for m in STEP_ERROR}
     eps = _rate_change_for(turns, plan_L, 0.5 * tol_q)
+    eps_qs = _qs_rate_change_for(turns, plan_L, 0.5 * tol_q)
     integ = scene.integrator
     explicit = set()
     if is_legacy():
         spt, eps = dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE
+        eps_qs = eps
         explicit.add("legacy")
     if integ.steps_per_turn is not None:
         spt = {m: int(integ.steps_per_turn) for m in spt}
         explicit.add("steps_per_turn")
     if integ.rate_change is not None:
-        eps = float(integ.rate_change)
+        eps = eps_qs = float(integ.rate_change)
         explicit.add("rate_change")
-    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit))
+    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit), qs_rate_change=eps_qs)
 
 
 def auto_plan(plan: StepPlan, scene) -> StepPlan:
@@ -508,12 +540,13 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
     if not plan.explicit or "legacy" in plan.explicit:
         return plan if "legacy" not in plan.explicit else StepPlan(
             dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE, plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
-            plan.explicit)
+            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE)
     omT = plan.turns * 2 * math.pi
     plan_L = min(plan.tol_L, plan.tol_q / omT) if omT > 0 else plan.tol_L
     tol = (plan_L, 0.5 * plan.tol_q)
     spt = {m: _spt_for(m, plan.free_turns if m == "free" else plan.turns, *tol) for m in STEP_ERROR}
-    return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q)
+    return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
+                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -521,7 +554,10 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
 # --------------------------------------------------------------------------------------------------
 #: order of each stepper (Richardson: the error of a run is its difference from a run with steps R times longer
 #: over R^p − 1); the free stepper of an axisymmetric or spherical body is exact
-ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8}
+ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8, "qs_flow": 1}
+#: qs_flow (gyro_sim/qs_flow.py) converges at second to third order, but not monotonically: its error terms beat with
+#: the field's ripple (f h mod 2π), and the ratio of its errors at 2h and h measured 1.3 to 13 (docs/accuracy.md);
+#: its stretches are estimated at order 1 (the run's difference from its shadow), as the stiff ETDRK4's below.
 #: ETDRK4 with steps longer than the fastest eddy mode's τ (a stiff step) is far from its order 4: measured on
 #: constant_field (τ = 0.26 ms) its error falls as h^1.4 to h^2 for h from 8 τ to 2 τ (order reduction; Hochbruck &
 #: Ostermann 2005), and the Richardson estimate at order 4 was 6 to 10 times too small. Its stretches are estimated
@@ -529,7 +565,7 @@ ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8}
 STIFF_ORDER = 1
 STIFF = "etdrk4 (stiff)"
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
-SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0}
+SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
 #: early ones catch a plan far off, then every 1/16
 CHECKS = tuple(2.0 ** -k for k in range(12, 4, -1)) + tuple(k / 16 for k in range(1, 16))
@@ -705,6 +741,8 @@ class ErrorControl:
         """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
         if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
             return self.plan.rate_change / RATE_CHANGE_MAX
+        if method == "qs_flow":
+            return SHADOW_RATIO[method] * self.plan.qs_rate_change / QS_RATE_CHANGE_MAX
         div = 1.0
         if method in SPT_MIN:
             div = SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]

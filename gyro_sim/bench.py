@@ -68,15 +68,15 @@ TARGET_ERROR = 1e-6
 #: accuracy.rtol of the averaged-models part: the averaged models enter at their MU_MAX (gyro_sim.fidelity.mu_max)
 AVERAGED_PART_RTOL = 2e-3
 OURS = "gyro_sim"  # method label prefix of the project's integrator
-#: right-hand-side evaluations per step (frozen_flow: its two closed-form passes)
-STAGES = {"lawson8": 12, "etdrk4": 4, "frozen_flow": 2}
+#: right-hand-side evaluations per step (frozen_flow, qs_flow: their two, three closed-form passes)
+STAGES = {"lawson8": 12, "etdrk4": 4, "frozen_flow": 2, "qs_flow": 3}
 #: the accuracy knob of each stepper (integrator.<knob>) and its sweep; steps_per_turn's from BenchConfig
 RATE_CHANGES = (3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
 
 
 def knob_of(method: str) -> str:
     """The ``integrator`` field that sets the accuracy of a stepper."""
-    return "rate_change" if method == "frozen_flow" else "steps_per_turn"
+    return "rate_change" if method in ("frozen_flow", "qs_flow") else "steps_per_turn"
 
 
 def refined(method: str, value: float) -> float:

@@ -59,15 +59,17 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       attitude: true                 # false: q, Euler angles not needed (isotropic rotor, no effects:
                                      # not integrated; NaN in the outputs; see Output)
     integrator:
-      method: auto                   # lawson8 | etdrk4 | frozen_flow | auto: frozen_flow where it applies
-                                     # and pays, else lawson8 unless an eddy mode is stiff (h > 2τ_n), then
-                                     # etdrk4; frozen_flow: steps longer than a field turn (axisymmetric
-                                     # rotor, no effects; gyro_sim/frozen_flow.py, docs/numerics.md)
+      method: auto                   # lawson8 | etdrk4 | frozen_flow | qs_flow | auto: qs_flow or frozen_flow
+                                     # where it applies and pays, else lawson8 unless an eddy mode is stiff
+                                     # (h > 2τ_n), then etdrk4; frozen_flow: steps longer than a field turn
+                                     # (axisymmetric rotor, no effects; gyro_sim/frozen_flow.py,
+                                     # docs/numerics.md); qs_flow: the same for the quasi-static torque, third
+                                     # order (gyro_sim/qs_flow.py)
       steps_per_turn: null           # lawson8/etdrk4: steps per period of the fastest rotation (spin or
                                      # field); free stepper: per turn of the body-frame motion; default:
                                      # chosen from accuracy and the run's turns (a number here wins, with a
                                      # warning where the error model says it misses the tolerance)
-      rate_change: null              # frozen_flow: largest change of the body rate per step as a fraction
+      rate_change: null              # frozen_flow, qs_flow: largest change of the body rate per step as a fraction
                                      # of the fastest rate, by the torque's scale (default: from accuracy)
       max_step: null                 # optional upper bound on the step, s
     controller:                      # optional: a law of gyro_ctl run every period (s)
@@ -294,9 +296,9 @@ class Output(_Strict):
 
 
 class Integrator(_Strict):
-    method: Literal["auto", "lawson8", "etdrk4", "frozen_flow"] = "auto"
+    method: Literal["auto", "lawson8", "etdrk4", "frozen_flow", "qs_flow"] = "auto"
     steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: from accuracy (gyro_sim/accuracy.py)
-    rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow; default: from accuracy
+    rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow, qs_flow; default: from accuracy
     max_step: Optional[Positive] = None
 
 
@@ -352,19 +354,25 @@ class Scene(_Strict):
             err = unknown_stators(self.controller, names)
             if err:
                 raise ValueError(f"controller.params.{err}")
-        if self.integrator.method == "frozen_flow":
+        meth = self.integrator.method
+        if meth in ("frozen_flow", "qs_flow"):
             J = self.rotor.inertia
             if not (J[0] == J[1] or J[1] == J[2] or J[0] == J[2]):
                 raise ValueError(
-                    f"integrator.method = 'frozen_flow' needs an axisymmetric rotor (two equal rotor.inertia); "
+                    f"integrator.method = {meth!r} needs an axisymmetric rotor (two equal rotor.inertia); "
                     f"rotor.inertia = {list(J)}: use lawson8, etdrk4 or auto"
                 )
             if self.effects.any:
                 on = [k for k in type(self.effects).model_fields if getattr(self.effects, k) is not None]
                 raise ValueError(
-                    f"integrator.method = 'frozen_flow' takes the electrodynamic torque only; effects {on} are on: "
+                    f"integrator.method = {meth!r} takes the electrodynamic torque only; effects {on} are on: "
                     f"use lawson8, etdrk4 or auto"
                 )
+        if meth == "qs_flow" and self.torque_model != "quasi_static":
+            raise ValueError(
+                f"integrator.method = 'qs_flow' integrates the quasi-static torque ([K] (1.2)); torque_model = "
+                f"{self.torque_model!r}: use torque_model: quasi_static, or frozen_flow, lawson8, etdrk4 or auto"
+            )
         self.output.check_windows(self.duration)
         check_result_size(self)
         if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:

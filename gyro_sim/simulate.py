@@ -13,13 +13,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Optional, Sequence
 
 import numpy as np
 
-from . import effects, frozen_flow, kernels
-from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, SHADOW_RATIO, STEPS_WARN, STIFF, ErrorControl, ErrorEstimate,
-                       auto_plan, field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
+from . import effects, frozen_flow, kernels, qs_flow
+from .accuracy import (PHASE_REL_MIN, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, STIFF, ErrorControl,
+                       ErrorEstimate, auto_plan, field_rates, is_legacy, mode_plan, spin_reach, step_plan,
+                       truncated_model)
 from .accuracy import warn as accuracy_warning
 from .compile_watch import CompileClock
 from .conductor import DEFAULT_N_MODES
@@ -64,6 +66,15 @@ def integrates_attitude(scene: Scene, attitude: Optional[bool] = None) -> bool:
                 and (ctl is None or ctl.law in LAWS_WITHOUT_ATTITUDE))
 
 
+@lru_cache(maxsize=64)
+def _initial_attitude(direction: tuple, psi: float, theta: float, phi: float) -> np.ndarray:
+    """:func:`attitude_from_euler` of a scene's initial state (L direction, Euler angles rad), kept per value: a pure
+    function, the same bits, ~15 µs each Simulator made of a scene spent once. Read only."""
+    q = attitude_from_euler(np.array(direction), psi, theta, phi)
+    q.flags.writeable = False
+    return q
+
+
 def controller_period(scene: Scene) -> Optional[float]:
     """s between the ticks of the scene's controller: its ``period``, else one per output sample; None without a
     controller section."""
@@ -78,15 +89,20 @@ def _case_flag(attitude: bool) -> tuple:
 
 
 def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u."""
-    u = np.asarray(u, dtype=float)
-    u = u / np.linalg.norm(u)
-    i = int(np.argmax(np.abs(u)))
-    z = np.zeros(3)
+    """Right-handed triad (e1, e2, u) of a stator axis u: e1 = next case axis (cyclic) ⟂ u. (Scalar code: a
+    Simulator makes one per stator, and np.cross costs ~5 µs a call.)"""
+    a = [float(v) for v in u]
+    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    u0, u1, u2 = a[0] / n, a[1] / n, a[2] / n
+    i = max(range(3), key=lambda k: abs((u0, u1, u2)[k]))  # (the first of equal ones, as np.argmax)
+    z = [0.0, 0.0, 0.0]
     z[(i + 1) % 3] = 1.0
-    e1 = z - np.dot(z, u) * u
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(u, e1), u
+    d = z[0] * u0 + z[1] * u1 + z[2] * u2
+    e = [z[0] - d * u0, z[1] - d * u1, z[2] - d * u2]
+    m = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    e0, e1, e2 = e[0] / m, e[1] / m, e[2] / m
+    return (np.array([e0, e1, e2]), np.array([u1 * e2 - u2 * e1, u2 * e0 - u0 * e2, u0 * e1 - u1 * e0]),
+            np.array([u0, u1, u2]))
 
 
 @dataclass
@@ -236,7 +252,8 @@ class Simulator:
         # the run's accuracy plan (gyro_sim/accuracy.py): made for ``horizon`` s (default: the scene's duration),
         # the same in-process and in the ROS node
         self.horizon = float(scene.duration if horizon is None else horizon)
-        self.mode_plan = mode_plan(scene, self.horizon, self.attitude, quiet=quiet)
+        om_reach = spin_reach(scene, self.horizon)  # the fastest spin the run can reach (rad/s)
+        self.mode_plan = mode_plan(scene, self.horizon, self.attitude, quiet=quiet, reach=om_reach)
         self.slip_met = 0.0  # largest slip bound met at a step plan (rad/s): the modes' error is judged there
         self._slip_warned = False
         # --- eddy-current model (physics.md §3)
@@ -297,7 +314,8 @@ class Simulator:
         Lmag = ini.kinetic_moment if ini.kinetic_moment is not None else J[2] * (ini.spin or 0.0)
         self.y = np.zeros(7 + 3 * tau.size + self.n_extra)
         self.y[0:3] = Lmag * d
-        self.y[3:7] = attitude_from_euler(d, ini.psi, ini.theta, ini.phi) if self.attitude else math.nan
+        self.y[3:7] = (_initial_attitude(tuple(d.tolist()), float(ini.psi), float(ini.theta), float(ini.phi))
+                       if self.attitude else math.nan)
         if scene.effects.damper is not None:
             k0 = 7 + 3 * tau.size
             self.y[k0:k0 + 3] = scene.effects.damper.offset
@@ -305,7 +323,8 @@ class Simulator:
         self.t = 0.0
         self._seg, self._seg_t_end = None, math.nan  # see _segment
         # the fields are switched on at t = 0 on a rotor free of eddy currents
-        self._field_step(np.zeros(3), self.field_now())
+        if self.tau.size:
+            self._field_step(np.zeros(3), self.field_now())
         self.steps = 0
         # free-rotor geometry: reference inertia and the axis carrying H_r
         if J[0] == J[1] == J[2]:
@@ -324,7 +343,6 @@ class Simulator:
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
         # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/accuracy.py): turns of the fastest
         # rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body motion
-        om_reach = spin_reach(scene, self.horizon)
         Lmag0 = float(np.linalg.norm(self.y[0:3]))
         om_plan = max(om_reach, field_rates(scene), self._effect_rate())
         L_bound = Lmag0 if om_reach <= Lmag0 * float(np.max(self.Jinv)) * (1 + 1e-12) else float(np.max(J)) * om_reach
@@ -379,7 +397,17 @@ class Simulator:
         self.y[7:7 + 3 * self.tau.size] -= np.tile(dBb, self.tau.size)
 
     def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T)."""
+        """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T). Kept while the time,
+        currents, rates and phases are the same (a run asks for them at its start, its first sample and its step
+        plan): read them, do not write into them."""
+        key = (self.t, self.current.tobytes(), self.rate.tobytes(), self.phase.tobytes())
+        kept = self.__dict__.get("_ph")
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        self._ph = (key, self._phasors())
+        return self._ph[1]
+
+    def _phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         on = self.current > 0
         c, s = np.cos(self.phase[on]), np.sin(self.phase[on])
         amp = (self.b * self.current)[on][:, None]
@@ -409,6 +437,9 @@ class Simulator:
         if m == "frozen_flow":
             self._check_knob(m)
             return m, self._frozen_flow_step()
+        if m == "qs_flow":
+            self._check_knob(m)
+            return m, self._frozen_flow_step(self.step_plan.qs_rate_change)
         if m == "auto":
             m, h = "lawson8", self._max_step(False, "lawson8")
             held = False
@@ -429,12 +460,23 @@ class Simulator:
                 if held:
                     h_def = min(h_def, self.tau_min)
                 if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h_def:
-                    self._check_knob("frozen_flow")
-                    return "frozen_flow", self._frozen_flow_step()
+                    # the quasi-static model: the quasi-static flow step instead (gyro_sim/qs_flow.py)
+                    m = "qs_flow" if self._qs_applies() else "frozen_flow"
+                    self._check_knob(m)
+                    return m, self._frozen_flow_step(self.step_plan.knob(m))
             self._check_knob(m)
             return m, h
         self._check_knob(m)
         return m, self._max_step(False, m)
+
+    def _qs_applies(self) -> bool:
+        """Whether ``auto`` takes the quasi-static flow step (gyro_sim/qs_flow.py) where it would take frozen_flow:
+        on the quasi-static torque model (not in the old defaults' runs, gyro_sim.accuracy.legacy). Its step is as
+        long (the same error model), costs a third (0.8 µs against 2.3 µs, one phasor), and its error measured no
+        larger on every quasi-static scene (docs/numerics.md). Where frozen_flow does not pay, lawson8 stays: its
+        error is the predictable one (it resolves the field's ripple): on reorient_L qs_flow takes 403 699 steps
+        (2.6 s CPU) against lawson8's 10 319 (0.18 s), docs/accuracy.md."""
+        return not is_legacy() and qs_flow.applies(self.scene, self.J, self.eff[effects.ON] != 0.0)
 
     def _warn_plan(self, om_plan: float) -> None:
         """Warn where the scene's attitude tolerance is below the floor a plan takes (PHASE_REL_MIN of the spin
@@ -463,7 +505,7 @@ class Simulator:
         used = self.__dict__.setdefault("methods_used", set())
         used.add(method)
         plan = self.step_plan
-        knob = "rate_change" if method == "frozen_flow" else "steps_per_turn"
+        knob = "rate_change" if method in RATE_KNOB else "steps_per_turn"
         if knob not in plan.explicit or method in self._knob_warned or self.quiet:
             return
         if method == "free" and self._free_axis != -1:
@@ -471,8 +513,7 @@ class Simulator:
         self._knob_warned.add(method)
         eL, eq = plan.predicted(method)
         if eL > plan.tol_L or eq > plan.tol_q:
-            want = self._auto_plan.rate_change if method == "frozen_flow" else self._auto_plan.steps_per_turn[method]
-            val = plan.rate_change if method == "frozen_flow" else plan.steps_per_turn[method]
+            want, val = self._auto_plan.knob(method), plan.knob(method)
             acc = self.scene.accuracy
             accuracy_warning(
                 f"scene {self.scene.name!r}: integrator.{knob} = {val:g} cannot meet accuracy (rtol {acc.rtol:g}, "
@@ -488,7 +529,7 @@ class Simulator:
         """Largest lawson8/etdrk4/free step (s) at ``spt`` steps per turn (default: the step plan's: the scene's
         knob, else chosen for its accuracy) of the fastest rotation, bounded by ``integrator.max_step``."""
         spt = spt or self.step_plan.steps_per_turn[method]
-        L = np.linalg.norm(self.y[0:3])
+        L = math.sqrt(float(self.y[0]) ** 2 + float(self.y[1]) ** 2 + float(self.y[2]) ** 2)
         if free:
             if self._free_axis != -1:
                 h = math.inf  # the free step is exact
@@ -496,8 +537,7 @@ class Simulator:
                 rate = L * np.max(np.abs(self.Jinv - self._inv_ref))
                 h = 2 * math.pi / (spt * rate) if rate > 0 else math.inf
         else:
-            om = max(L * np.max(self.Jinv), self._nu_max, float(np.max(self.field_om, initial=0.0)),
-                     self._effect_rate())
+            om = max(L * max(self.Jinv), self._nu_max, max(self.field_om, default=0.0), self._effect_rate())
             h = 2 * math.pi / (spt * om) if om > 0 else math.inf
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
@@ -509,14 +549,7 @@ class Simulator:
         |m||B| the conductor gives at a slip up to Ω + ν_max (J_min Ω ε / N); ε = ``eps``, else the scene's
         ``integrator.rate_change``, else the one chosen for the scene's accuracy (``step_plan``)."""
         eps = eps or self.step_plan.rate_change
-        Bre, Bim, _ = self.phasors()
-        B = float(np.sum(np.sqrt(np.sum(Bre ** 2, axis=1) + np.sum(Bim ** 2, axis=1))))
-        om = max(float(np.linalg.norm(self.y[0:3])) * float(np.max(self.Jinv)), self._nu_max,
-                 float(np.max(np.abs(self.field_om), initial=0.0)))
-        N = self.c_m * B * B * (0.5 * float(np.sum(np.abs(self.w))) + self.tail * (om + self._nu_max))
-        if N > 0:  # the mean torque at the present slips, no larger than the bound (a spin-up's step grows with it)
-            N = min(N, max(self._local_torque_scale(Bre, Bim), frozen_flow.LOCAL_SCALE_MIN * N))
-        h = eps * float(np.min(self.J)) * om / N if N > 0 and om > 0 else math.inf
+        h = eps * self._torque_time()
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
         return h
@@ -529,6 +562,32 @@ class Simulator:
         e_a = quat_to_matrix(self.y[3:7])[:, ax] if self.attitude and Jt != Ja else None
         return frozen_flow.torque_scale(Bre, Bim, self.phasors()[2], self.y[0:3], Jt, Ja, e_a, self.c_m, self.w,
                                         self.tau, self.tail)
+    def _torque_time(self) -> float:
+        """J_min Ω / N (s): the time the torque's scale N takes to change the fastest rate Ω by itself (inf without
+        torque or rate). N: the mean torque at the present slips (:meth:`_local_torque_scale`), no larger than the
+        bound c|B|²(½Σ|w_n| + T_tail(Ω + ν_max)) at the largest slip and no smaller than LOCAL_SCALE_MIN of it.
+        Kept while the commands, the rates met, L and q are the same (a step plan asks for it for several knobs)."""
+        key = (self.current.tobytes(), self.rate.tobytes(), self._nu_max, *self.y[0:7].tolist())
+        kept = self.__dict__.get("_tt")
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        # |B| summed over the phasors: √2 b_k I_k a stator (its Bre, Bim are b_k I_k times two orthonormal vectors),
+        # |B_p| a general field term (scalar code: this is asked once per command segment)
+        B = sum(math.sqrt(2.0) * b * c for b, c in zip(self.b.tolist(), self.current.tolist()) if c > 0)
+        B += sum(float(np.linalg.norm(f)) for f in self.field_B) if self.field_B.size else 0.0
+        y = self.y
+        om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * max(self.Jinv.tolist()),
+                 self._nu_max, max((abs(f) for f in self.field_om.tolist()), default=0.0))
+        N = self.c_m * B * B * (0.5 * sum(abs(v) for v in self.w.tolist()) + self.tail * (om + self._nu_max))
+        if N > 0 and self.w.size and frozen_flow.supported(self.J) >= 0:
+            # the mean torque at the present slips, no larger than the bound: a spin-up's step grows as its slip falls
+            # (the eddy-mode models; qs_flow's plan and auto's choice of it were measured at the bound: on
+            # nutation_slow the local scale made auto take qs_flow, whose ticks are not compiled, at 1.2x the cost)
+            Bre, Bim, _ = self.phasors()
+            N = min(N, max(self._local_torque_scale(Bre, Bim), frozen_flow.LOCAL_SCALE_MIN * N))
+        tt = min(self.J.tolist()) * om / N if N > 0 and om > 0 else math.inf
+        self._tt = (key, tt)
+        return tt
 
     def _effect_rate(self) -> float:
         """Fastest rate (rad/s) an effect brings: the body rate the flywheel drives, the damper's spring."""
@@ -574,6 +633,11 @@ class Simulator:
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
                 self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
                 *_case_flag(self.attitude))
+        elif method == "qs_flow":
+            ax = frozen_flow.supported(self.J)
+            k_out, steps = qs_flow.integrate_qs(
+                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
+                self.J[ax], ax, self.c_m, self.w, self.tail, out_y, out_N, k_out, self.eff, *_case_flag(self.attitude))
         elif free:
             k_out, steps = kernels.integrate_free(
                 self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
@@ -628,8 +692,8 @@ class Simulator:
         a mode is stiff at its step, as :meth:`_step_plan` does)."""
         if method == "free":
             return self._max_step(True, "free")
-        if method == "frozen_flow":
-            return self._frozen_flow_step()
+        if method in RATE_KNOB:
+            return self._frozen_flow_step(self.step_plan.knob(method))
         h = self._max_step(False, method)
         if method == "lawson8" and self.scene.integrator.method == "auto" and h > 2.0 * self.tau_min:
             h = self.tau_min
@@ -961,7 +1025,7 @@ class Runner:
             f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
             if f is not None:
                 sim.step_div *= f
-            if f is not None or method == "frozen_flow":  # (frozen_flow: its step follows the torque at the slip now)
+            if f is not None or method in ("frozen_flow", "qs_flow"):  # (their step follows the torque at the slip now)
                 sim.replan()
                 sh.replan()
 
@@ -970,10 +1034,13 @@ class Runner:
         if not sel.size:
             return
         r = slice(rows.start, rows.start + sel.size)
-        dt = np.diff(np.concatenate([[self._last_t], sel]))
-        N = np.linalg.norm(self.out_N[r], axis=1)
         Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
         self.control.note_L(float(np.max(Ln)))
+        if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
+            self._last_t = float(sel[-1])
+            return
+        dt = np.diff(np.concatenate([[self._last_t], sel]))
+        N = np.linalg.norm(self.out_N[r], axis=1)
         om = Ln * float(np.max(self.sim.Jinv))
         # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
         self._impulse = float(np.cumsum(np.concatenate([[self._impulse], N * dt]))[-1])
@@ -1007,8 +1074,8 @@ class Runner:
                 if not k or k >= R_MEASURABLE * ctl.shadow_steps.get(m, 0):
                     continue  # (measured)
                 m = "etdrk4" if m == STIFF else m
-                knob = (sim.step_plan.rate_change / sim.step_div if m == "frozen_flow"
-                        else sim.step_plan.steps_per_turn[m] * sim.step_div)
+                knob = (sim.step_plan.knob(m) / sim.step_div if m in RATE_KNOB
+                        else sim.step_plan.knob(m) * sim.step_div)
                 pL, pq = sim.step_plan.predicted(m, knob)
                 sL, sq, how = sL + pL, sq + pq, "richardson+model"
         else:

@@ -196,6 +196,10 @@ def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, ou
     return nb, steps, s, n_log
 
 
+#: the steppers the compiled loop links (:func:`stepper`); a segment of another (qs_flow) goes break by break
+COMPILED_STEPPERS = frozenset({"lawson8", "etdrk4", "frozen_flow", "free"})
+
+
 def stepper(sim, seg: tuple) -> tuple:
     """(Pf, Pz, Pa): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
     ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow or free, the others None; the
@@ -256,7 +260,7 @@ class TickLoop:
         if r.row == 0 or r.done:
             return None
         i0, j = r._bi, self._extent(until)
-        if j <= i0:
+        if j <= i0 or r.sim._segment()[5] not in COMPILED_STEPPERS:
             return None
         with CompileClock() as clock:
             bk, law_at, rows, n_log, log_c, log_r = self._advance_main(r.breaks[i0:j])
