@@ -634,7 +634,7 @@ def free_step(y, h, Jinv, inv_ref, axis, tau):
             y[7 + 3 * n + j] *= f
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_y, out_N, k_out):
     """Torque-free counterpart of :func:`integrate` (same stops/record/output contract).
 
@@ -809,7 +809,7 @@ def lawson_case_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols, 
                 y[k] += WB[j, k] * Fs[j, k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
               out_y, out_N, k_out, eff, A, b, c, case=None):
     """Integrate y from t0 through each time in ``t_stops`` (increasing).
@@ -887,7 +887,7 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
     return k_out, steps
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k, case=None):
     """Output sample k: the state y and the torque (case, N·m) at phase time s (scratch: cs, sn (P,), F (n,),
     work (25,)); ``case`` (None or True; None prunes the case-frame code): the state has no attitude

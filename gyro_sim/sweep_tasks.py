@@ -9,9 +9,14 @@ never more than an even share of what is left over the worker threads, so that t
 a hard stop loses at most :data:`TASKS_AHEAD` tasks per thread. Runs are independent: how they are grouped
 changes no number (``test/test_sweep.py`` checks the results bit for bit).
 
-The local cluster's workers run without Dask's statistical profiler (:data:`WORKER_CONFIG`): it samples the
-running task's stack every 10 ms from a thread of its own (measured: 5–6 % of a core besides the runs, against
-3 % without it, and runs 1–8 % longer).
+Inside a worker a run cost a few per cent more CPU than in-process (12.9–14.0 against 12.3–12.7 ms a run of the
+default scene over 2 s, on an idle machine): the worker's other threads take the GIL from the run's thread. Two
+things remove it: the local cluster's workers run without Dask's statistical profiler (:data:`WORKER_CONFIG`),
+which samples the running task's stack every 10 ms from a thread of its own (5–6 % of a core besides the runs,
+against 3 % without it), and the compiled kernels a run calls from Python release the GIL (``nogil=True``:
+``kernels.integrate``, ``integrate_free``, ``record_sample``, ``frozen_flow.integrate_frozen``), so the event
+loop's thread takes it without interrupting the run. What is left of the gap on a busy machine is CPU contention:
+the client, the scheduler and every other process share the same cores (docs/sweeps.md).
 """
 from __future__ import annotations
 
