@@ -224,11 +224,15 @@ def headline(res) -> list[str]:
     for row in res.sweep:
         m, s = row["measure"], row["measure"]["serial"]
         a1, a2 = m.get("one_worker_auto"), m.get("all_workers_auto")
+        two = row["two_processes"]
         if a2:
             out.append(f"sweep of {row['runs']} runs of {row['duration']:g} s: {s['runs_per_s']:.1f} runs/s in one "
-                       f"process, {a2['runs_per_s']:.1f} on {row['workers']} workers (x{a2['speedup']:.2f}; one run "
-                       f"per task: x{m['all_workers']['speedup']:.2f}); a run in a worker costs "
-                       f"{a1['run_cpu_ratio']:.2f}x its CPU in-process (load {row['load']})")
+                       f"process, {a2['runs_per_s']:.1f} on {row['workers']} workers (x{a2['speedup']:.2f}"
+                       + (f"; one run per task: x{m['all_workers']['speedup']:.2f}" if "all_workers" in m else "")
+                       + (f"; {two['processes']} plain processes: x{two['runs_per_s'] / s['runs_per_s']:.2f}"
+                          if two else "") + ")"
+                       + (f"; a run in a worker costs {a1['run_cpu_ratio']:.2f}x its CPU in-process, "
+                          f"{a1['run_wall_ratio']:.2f}x its wall" if a1 else "") + f" (load {row['load']})")
     return out
 
 
