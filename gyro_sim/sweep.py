@@ -1253,7 +1253,7 @@ def _pass_figures(n: int, wall: float, rows: list, tasks: int, workers: int) -> 
 
 def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int] = None,
             noop_tasks: int = 400, scheduler: Optional[str] = None, stream=None,
-            configs: Sequence[str] = tuple(MEASURE_CONFIGS)) -> dict:
+            configs: Sequence[str] = tuple(MEASURE_CONFIGS), repeats: int = 1) -> dict:
     """Time the sweep's runs in this process and on Dask, and the bare task overhead; returns (and prints) the
     figures.
 
@@ -1264,7 +1264,8 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
     ``run_sweep``). Workers are warmed first (simulator imported, kernels loaded); cluster start is reported
     apart. For each: runs/s, the speed-up over this process, the mean cost of a run inside the worker (wall and
     CPU of its thread, ``run_wall``, ``run_cpu``) against in-process, and the overhead per task = (workers × wall −
-    Σ run time in the workers) / tasks; then the round trip of ``noop_tasks`` empty tasks (0: skipped)."""
+    Σ run time in the workers) / tasks; then the round trip of ``noop_tasks`` empty tasks (0: skipped). ``repeats``:
+    passes of each, the configurations taking turns, the fastest kept (the one a busy machine disturbed least)."""
     stream = stream or sys.stdout
     items = []
     for v in spec.variants():
@@ -1280,9 +1281,17 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
         raise SweepError(f"measure: unknown configuration(s) {unknown}; allowed: {', '.join(MEASURE_CONFIGS)}")
     n = len(items)
     payload = spec.payload()
-    out: dict = {"runs": n}
+    out: dict = {"runs": n, "repeats": max(1, int(repeats))}
     run_chunk(payload, items[:1])  # warm-up: imports, compiled kernels, first-call costs
-    before = _pass_figures(n, *_timed_rows(payload, items, None, 1), workers=1)
+    rounds = max(1, int(repeats))
+
+    def one_pass(client, bb, ws=None, workers_=1):
+        return _pass_figures(n, *_timed_rows(payload, items, client, bb, worker_addrs=ws), workers=workers_)
+
+    def fastest(passes):
+        return max(passes, key=lambda o: o["runs_per_s"])
+
+    before = fastest([one_pass(None, 1) for _ in range(rounds)])
     t0 = time.perf_counter()
     client, cluster, nw, mode = _dask_client(workers, scheduler)
     out["mode"], out["workers"] = mode, nw
@@ -1292,11 +1301,14 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
         client.run(run_chunk, payload, items[:1])  # the same warm-up in every worker
         out["startup"] = time.perf_counter() - t0
         addrs = sorted(client.scheduler_info()["workers"])
+        passes: dict = {label: [] for label in configs}
+        for _ in range(rounds):  # (the configurations in turn: a load that changes meets them all)
+            for label in configs:
+                which, bb = MEASURE_CONFIGS[label]
+                ws = addrs[:1] if which == "one" else None
+                passes[label].append(one_pass(client, bb or b, ws, 1 if ws else nw))
         for label in configs:
-            which, bb = MEASURE_CONFIGS[label]
-            ws = addrs[:1] if which == "one" else None
-            out[label] = _pass_figures(n, *_timed_rows(payload, items, client, bb or b, worker_addrs=ws),
-                                       workers=1 if ws else nw)
+            out[label] = fastest(passes[label])
         if noop_tasks:
             t0 = time.perf_counter()
             futs = client.map(_noop, range(noop_tasks), pure=False)
@@ -1307,7 +1319,7 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
         client.close()
         if cluster is not None:
             cluster.close()
-    after = _pass_figures(n, *_timed_rows(payload, items, None, 1), workers=1)
+    after = fastest([one_pass(None, 1) for _ in range(rounds)])
     out["serial_before"], out["serial_after"] = before, after
     out["serial"] = serial = {k: (before[k] + after[k]) / 2 for k in ("wall", "run_wall", "run_cpu")}
     serial["runs_per_s"] = n / serial["wall"]
@@ -1334,7 +1346,8 @@ def measure_lines(out: dict, name: str = "") -> list:
               "one_worker_auto": "Dask, 1 worker, auto batch", "all_workers_auto": f"Dask, {nw} workers, auto batch"}
     lines = [
         f"measured on {os.cpu_count()} cores, {out['mode']}: {n} runs of sweep {name} "
-        f"(mean run {serial['run_wall'] * 1e3:.2f} ms in-process)",
+        f"(mean run {serial['run_wall'] * 1e3:.2f} ms in-process)"
+        + (f"; the fastest of {out['repeats']} passes each" if out.get("repeats", 1) > 1 else ""),
         f"  cluster start + connect + warm-up {out['startup']:9.2f} s (not in the figures below)",
         f"  {'in-process, serial (no Dask)':<34s}{serial['runs_per_s']:9.2f} runs/s  {serial['wall']:7.2f} s  "
         f"(before the cluster {out['serial_before']['runs_per_s']:.2f}, after {out['serial_after']['runs_per_s']:.2f}); "
