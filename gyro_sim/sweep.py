@@ -1253,7 +1253,8 @@ def _pass_figures(n: int, wall: float, rows: list, tasks: int, workers: int) -> 
 
 def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int] = None,
             noop_tasks: int = 400, scheduler: Optional[str] = None, stream=None,
-            configs: Sequence[str] = tuple(MEASURE_CONFIGS), repeats: int = 1) -> dict:
+            configs: Sequence[str] = tuple(MEASURE_CONFIGS), repeats: int = 1,
+            each_round: Optional[Callable] = None) -> dict:
     """Time the sweep's runs in this process and on Dask, and the bare task overhead; returns (and prints) the
     figures.
 
@@ -1265,7 +1266,9 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
     apart. For each: runs/s, the speed-up over this process, the mean cost of a run inside the worker (wall and
     CPU of its thread, ``run_wall``, ``run_cpu``) against in-process, and the overhead per task = (workers × wall −
     Σ run time in the workers) / tasks; then the round trip of ``noop_tasks`` empty tasks (0: skipped). ``repeats``:
-    passes of each, the configurations taking turns, the fastest kept (the one a busy machine disturbed least)."""
+    passes of each, the configurations taking turns, the fastest kept (the one a busy machine disturbed least);
+    ``each_round()``, if given, is called after each round's passes (the cluster idle) and its returns are kept in
+    ``out["rounds"]`` (e.g. another measurement that should meet the same load)."""
     stream = stream or sys.stdout
     items = []
     for v in spec.variants():
@@ -1302,11 +1305,14 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
         out["startup"] = time.perf_counter() - t0
         addrs = sorted(client.scheduler_info()["workers"])
         passes: dict = {label: [] for label in configs}
+        out["rounds"] = []
         for _ in range(rounds):  # (the configurations in turn: a load that changes meets them all)
             for label in configs:
                 which, bb = MEASURE_CONFIGS[label]
                 ws = addrs[:1] if which == "one" else None
                 passes[label].append(one_pass(client, bb or b, ws, 1 if ws else nw))
+            if each_round is not None:
+                out["rounds"].append(each_round())
         for label in configs:
             out[label] = fastest(passes[label])
         if noop_tasks:

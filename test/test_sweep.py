@@ -488,8 +488,8 @@ def test_measure_reports_the_figures(capsys):
     assert out["serial"]["run_cpu"] > 0 and out["serial_before"]["runs_per_s"] > 0 and out["serial_after"]["runs_per_s"] > 0
     assert 0 < out["scaling_efficiency"] < 1.5 and out["batched_speedup"] > 0 and out["noop_per_task"] > 0
     assert "efficiency" in text and "batched speed-up" in text and "auto batch" in text and "ms CPU" in text
-    part = sw.measure(spec, workers=1, noop_tasks=0, configs=("one_worker_auto",), repeats=2)
+    part = sw.measure(spec, workers=1, noop_tasks=0, configs=("one_worker_auto",), repeats=2, each_round=lambda: 7)
     assert set(sw.MEASURE_CONFIGS) & set(part) == {"one_worker_auto"} and "noop_per_task" not in part
-    assert part["repeats"] == 2 and "fastest of 2 passes" in capsys.readouterr().out
+    assert part["repeats"] == 2 and part["rounds"] == [7, 7] and "fastest of 2 passes" in capsys.readouterr().out
     with pytest.raises(sw.SweepError, match="unknown configuration"):
         sw.measure(spec, workers=1, configs=("three_workers",))
