@@ -502,7 +502,10 @@ class BenchConfig:
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
     ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
-    only: Optional[str] = None  # run this part alone ("accuracy", "ticks")
+    startup: bool = False  # the startup part (bench_scaling): new processes' import and first-run times
+    startup_baseline: Optional[str] = None  # a source tree of the code before, timed beside this one
+    sweep: bool = False  # the sweep part (bench_scaling): runs/s in-process, on 1 and 2 Dask workers
+    only: Optional[str] = None  # run this part alone ("accuracy", "ticks", "startup", "sweep")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -514,7 +517,7 @@ def quick_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
     """Under a minute: 0.2 s horizons (100 turns of the default scene's field), every tolerance."""
     return BenchConfig(mode="quick", scenes=tuple(scenes), default_horizon=0.2,
                        horizon={"spinup_thin_shell": 0.2, "spinup_solid_sphere": 0.2},
-                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True)
+                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True, startup=True, sweep=True)
 
 
 def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
@@ -524,7 +527,7 @@ def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
                        horizon={"spinup_thin_shell": 2.0, "spinup_solid_sphere": 2.0},
                        spt_ref=3072, long_horizon_scenes=("spinup_thin_shell",), long_spt_ref=1536,
                        mode_horizon=10.0, mode_baseline_horizon=0.1, spinup_duration=1200.0,
-                       min_wall=0.3, max_reps=5, ros=True)
+                       min_wall=0.3, max_reps=5, ros=True, startup=True, sweep=True)
 
 
 # ----------------------------------------------------------------------------------------
@@ -549,6 +552,8 @@ class Results:
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
     ticks: list = field(default_factory=list)  # dicts of the per-tick part (bench_ticks)
+    startup: list = field(default_factory=list)  # dicts of the startup part (bench_scaling)
+    sweep: list = field(default_factory=list)  # dicts of the sweep part (bench_scaling)
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     notes: list = field(default_factory=list)
     started: str = ""
@@ -998,6 +1003,17 @@ def _profile_loops():
     return _LOOPS[0], _LOOPS[1]
 
 
+def scaling_parts(res: Results, only: Optional[str] = None) -> None:
+    """The startup and sweep parts (gyro_sim/bench_scaling.py) where the config has them (``only``: that one)."""
+    from .bench_scaling import startup_part, sweep_part
+
+    cfg, quick = res.config, res.config.mode == "quick"
+    if only == "startup" or (only is None and cfg.startup):
+        startup_part(res, quick, baseline=cfg.startup_baseline, say=_say)
+    if only == "sweep" or (only is None and cfg.sweep):
+        sweep_part(res, quick, say=_say)
+
+
 def _once(fn) -> float:
     """CPU seconds of one call (time.process_time)."""
     c0 = time.process_time()
@@ -1009,6 +1025,11 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     """Run every part of ``cfg``, write DIR/bench.md, bench.csv, work_precision.png; return the results."""
     res = Results(cfg, started=_dt.datetime.now().astimezone().isoformat(timespec="seconds"), command=command)
     w0 = time.perf_counter()
+    if cfg.only in ("startup", "sweep"):
+        scaling_parts(res, cfg.only)
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     if cfg.only == "accuracy":
         from .bench_accuracy import accuracy_part
 
@@ -1052,6 +1073,7 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         from .bench_ros import ros_part
 
         ros_part(res, quick=cfg.mode == "quick")
+    scaling_parts(res)
     if cfg.accuracy:
         from .bench_accuracy import accuracy_part
 
@@ -1129,8 +1151,9 @@ def headline_lines(res: Results) -> list[str]:
                      f"≈ {_fmt(s['error'], '.1e')} rad (estimate), spin {s['spin_rev_s']:.1f} rev/s "
                      f"({100 * s['spin_fraction']:.2f} % of the field rate)")
     from .bench_ros import headline as ros_headline
+    from .bench_scaling import headline as scaling_headline
 
-    return lines + ros_headline(res)
+    return lines + ros_headline(res) + scaling_headline(res)
 
 
 def speedup_table(res: Results) -> list[dict]:
@@ -1334,9 +1357,11 @@ def markdown(res: Results) -> str:
                      for p in res.profile])
     from .bench_ros import markdown as ros_markdown
     from .bench_ticks import markdown_lines as ticks_markdown
+    from .bench_scaling import markdown as scaling_markdown
 
     L += ticks_markdown(res)
     L += ros_markdown(res)
+    L += scaling_markdown(res)
     if res.accuracy is not None:
         from .bench_accuracy import markdown_lines
 
@@ -1402,7 +1427,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
     p.add_argument("--no-accuracy", action="store_true",
                    help="skip the accuracy part (every built-in scene against the accuracy it states)")
-    p.add_argument("--only", choices=["accuracy", "ticks"], help="run this part alone")
+    p.add_argument("--no-startup", action="store_true", help="skip the startup part (new processes' import times)")
+    p.add_argument("--no-sweep", action="store_true", help="skip the sweep part (runs/s on 1 and 2 Dask workers)")
+    p.add_argument("--startup-baseline", metavar="DIR",
+                   help="a source tree of the code before (e.g. git archive of a commit): its start-up is timed beside "
+                        "this code's, in the same run")
+    p.add_argument("--only", choices=["accuracy", "ticks", "startup", "sweep"], help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")
     return p
@@ -1421,6 +1451,9 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     cfg = (quick_config if args.quick else full_config)(args.scenes)
     cfg.ros = cfg.ros and not args.no_ros
+    cfg.startup = cfg.startup and not args.no_startup
+    cfg.sweep = cfg.sweep and not args.no_sweep
+    cfg.startup_baseline = args.startup_baseline
     cfg.accuracy = not args.no_accuracy
     cfg.only = args.only
     if args.accuracy_scenes:

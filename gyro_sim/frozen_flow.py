@@ -488,7 +488,7 @@ def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
     return S.real
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes,
                      out_y, out_N, k_out, eff, case=None):
     """Integrate y from t0 through each time in ``t_stops`` with frozen-flow steps no longer than ``h_max``

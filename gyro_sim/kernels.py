@@ -634,7 +634,7 @@ def free_step(y, h, Jinv, inv_ref, axis, tau):
             y[7 + 3 * n + j] *= f
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_y, out_N, k_out):
     """Torque-free counterpart of :func:`integrate` (same stops/record/output contract).
 
@@ -665,10 +665,32 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
 # Lawson (integrating-factor) explicit Runge–Kutta with the attitude on the rotation group
 
 
+def _dop853_coefficients():
+    """SciPy's module of the DOP853 table (``scipy.integrate._ivp.dop853_coefficients``: NumPy arrays only), read
+    from its file without importing ``scipy.integrate`` (solve_ivp, QUADPACK, ODEPACK: 0.1–0.2 s of a process's
+    start-up); imported the usual way where SciPy's layout differs."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    name = "scipy.integrate._ivp.dop853_coefficients"
+    if name in sys.modules:
+        return sys.modules[name]
+    scipy_spec = importlib.util.find_spec("scipy")
+    path = Path(scipy_spec.origin).parent / "integrate" / "_ivp" / "dop853_coefficients.py" if scipy_spec else None
+    if path is not None and path.is_file():
+        spec = importlib.util.spec_from_file_location("gyro_sim._dop853_coefficients", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    import importlib
+
+    return importlib.import_module(name)
+
+
 def dop853_tableau() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(A, b, c) of the 12-stage, 8th-order Dormand–Prince method (Hairer, Nørsett & Wanner; SciPy's table)."""
-    from scipy.integrate._ivp import dop853_coefficients as d
-
+    d = _dop853_coefficients()
     s = d.N_STAGES
     return (np.ascontiguousarray(d.A[:s, :s], dtype=float), np.ascontiguousarray(d.B, dtype=float),
             np.ascontiguousarray(d.C[:s], dtype=float))
@@ -787,7 +809,7 @@ def lawson_case_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols, 
                 y[k] += WB[j, k] * Fs[j, k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
               out_y, out_N, k_out, eff, A, b, c, case=None):
     """Integrate y from t0 through each time in ``t_stops`` (increasing).
@@ -865,7 +887,7 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
     return k_out, steps
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def record_sample(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N, k, case=None):
     """Output sample k: the state y and the torque (case, N·m) at phase time s (scratch: cs, sn (P,), F (n,),
     work (25,)); ``case`` (None or True; None prunes the case-frame code): the state has no attitude

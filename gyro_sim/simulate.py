@@ -44,8 +44,17 @@ FROZEN_FLOW_COST = 2.0
 #: control laws that read only t, L and the stators (not q, θ or Ω_b): with one of them (or none) a scene may
 #: run without attitude; any other law (psi_switching, reorient: θ and the polar axis) keeps it
 LAWS_WITHOUT_ATTITUDE = frozenset({"spinup", "off", "hold", "manual"})
-#: (A, b, c) of each field stepper for kernels.integrate: DOP853's for lawson8, empty for ETDRK4
-_TABLEAU = {"lawson8": kernels.dop853_tableau(), "etdrk4": (np.empty((0, 0)), np.empty(0), np.empty(0))}
+#: (A, b, c) of each field stepper for kernels.integrate: DOP853's for lawson8, empty for ETDRK4 (made on first use:
+#: a process that runs no lawson8 step reads no table)
+_TABLEAU: dict = {}
+
+
+def _tableau(method: str) -> tuple:
+    """(A, b, c) of ``method`` ('lawson8' or 'etdrk4') for kernels.integrate, kept once made."""
+    if method not in _TABLEAU:
+        _TABLEAU[method] = (kernels.dop853_tableau() if method == "lawson8"
+                            else (np.empty((0, 0)), np.empty(0), np.empty(0)))
+    return _TABLEAU[method]
 
 
 def integrates_attitude(scene: Scene, attitude: Optional[bool] = None) -> bool:
@@ -645,7 +654,7 @@ class Simulator:
         else:
             k_out, steps = kernels.integrate(
                 self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_TABLEAU[method], *_case_flag(self.attitude))
+                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_tableau(method), *_case_flag(self.attitude))
         self.steps += steps
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
@@ -1087,9 +1096,11 @@ class Runner:
         e_g, e_im = sim.mode_plan.error_at(max(sim.slip_met, 0.0))
         mL = max(e_g, e_im) * self._impulse / L_max
         mq = e_im * self._spin_dev
-        from .fidelity import AVERAGED_ERROR
+        aL = 0.0
+        if self.averaged_eps:  # (only a hybrid run has averaged stretches: gyro_sim.fidelity imports SciPy's solvers)
+            from .fidelity import AVERAGED_ERROR
 
-        aL = AVERAGED_ERROR * max(self.averaged_eps, default=0.0)
+            aL = AVERAGED_ERROR * max(self.averaged_eps)
         att = sim.attitude and not self.averaged_eps
         return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq) if att else math.nan, steps_L=sL,
                              steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,

@@ -19,11 +19,13 @@ variant: the varied values, the metrics, optional time series, the package versi
 hash of (scene, fixed overrides, variant values, metrics); a sweep run again skips what its file
 already holds, and a hard stop loses at most the runs in flight (a journal beside the file).
 
-``--batch N`` is the batched path: N variants per task, run one after the other in the worker,
-so the per-task costs (scheduling round trip, (de)serialisation, result hand-back) are paid once
-per N runs. It does not vectorise the integrator: each run is the same compiled code as
-``gyro_sim.run``. ``--measure`` reports runs/s with one worker and all cores, the overhead per
-task and the speed-up of the batched path.
+A task runs several variants one after the other in the worker, so the per-task costs (scheduling
+round trip, (de)serialisation, result hand-back) are paid once per task: by default (``--batch auto``)
+each task is sized as it is sent to last about 0.25 s at the run time seen so far
+(:mod:`gyro_sim.sweep_tasks`); ``--batch N`` gives every task N variants. It does not vectorise the
+integrator: each run is the same compiled code as ``gyro_sim.run``. ``--measure`` reports runs/s
+in-process, with one worker and all cores (one run per task, N per task, auto), the overhead per task
+and the cost of a run inside a worker against in-process.
 
 The core (specs, variants, metrics, serial execution, the Parquet writer aside) needs no Dask:
 ``dask.distributed``, ``pyarrow`` and ``tqdm`` (the ``sweep`` extra) are imported only where used.
@@ -57,7 +59,7 @@ from .scene_text import parse_scene_text, read_scene_file
 __all__ = [
     "SweepError", "Axis", "RandomVar", "Metric", "Variant", "SweepSpec", "SweepResult",
     "parse_axis", "parse_random", "parse_metric", "load_sweep", "spec_from_dict", "builtin_sweeps",
-    "run_chunk", "run_sweep", "read_results", "write_results", "plot_sweep", "measure", "sweep_main",
+    "run_chunk", "run_sweep", "read_results", "write_results", "plot_sweep", "measure", "measure_lines", "sweep_main",
     "QUANTITIES", "METRIC_FUNCTIONS", "METRIC_ALIASES",
 ]
 
@@ -746,21 +748,22 @@ def _decimate(y: np.ndarray, n: int) -> list:
 def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
     """Run the variants ``items`` = [(run_id, values), ...] of a sweep ``payload`` (SweepSpec.payload)
     one after the other; returns one row per item: run_id, status ('ok' | 'invalid' | 'failed'),
-    error, metrics {name: float}, series {quantity: [..]}, wall_time_run (s), worker. Never raises
-    for a bad variant or a failed run: the reason goes in ``error``."""
+    error, metrics {name: float}, series {quantity: [..]}, wall_time_run (s), cpu_time_run (s of this
+    thread's CPU), worker. Never raises for a bad variant or a failed run: the reason goes in ``error``."""
     metrics = [parse_metric(m) for m in payload["metrics"]]
     series = payload.get("series") or []
     npts = int(payload.get("series_points", 1000))
     label = _worker_label()
     rows = []
     for run_id, values in items:
-        w0 = time.perf_counter()
+        w0, c0 = time.perf_counter(), time.thread_time()
         row = {"run_id": run_id, "status": "ok", "error": None, "metrics": {}, "series": {}, "worker": label}
         try:
             scene = _scene_for(payload["scene"], payload.get("set") or {}, values, payload.get("where", ""),
                                payload.get("name", "scene"))
         except SceneError as e:
-            row.update(status="invalid", error=str(e), wall_time_run=time.perf_counter() - w0)
+            row.update(status="invalid", error=str(e), wall_time_run=time.perf_counter() - w0,
+                       cpu_time_run=time.thread_time() - c0)
             rows.append(row)
             continue
         try:
@@ -784,6 +787,7 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
             msg = str(e) if isinstance(e, (FloatingPointError, RuntimeError)) and str(e) else f"{type(e).__name__}: {e}"
             row.update(status="failed", error=msg, metrics={}, series={})
         row["wall_time_run"] = time.perf_counter() - w0
+        row["cpu_time_run"] = time.thread_time() - c0  # (this thread's CPU s: measure() compares it, not stored)
         rows.append(row)
     return rows
 
@@ -904,6 +908,7 @@ class SweepResult:
     wall: float = 0.0  # s, executing the runs (cluster start excluded)
     startup: float = 0.0  # s, starting / connecting to the cluster
     workers: int = 0
+    tasks: int = 0  # tasks sent (runs in this process: one per run)
     mode: str = ""
     interrupted: bool = False
     out: Optional[Path] = None
@@ -962,8 +967,13 @@ def _dask_client(workers: Optional[int], scheduler: Optional[str]):
                 raise SweepError(f"the Dask scheduler {scheduler} has no workers") from None
             n = len(client.scheduler_info().get("workers", {}))
         return client, None, n, f"scheduler {client.scheduler.address}"
+    import dask
+
+    from .sweep_tasks import WORKER_CONFIG
+
     n = int(workers) if workers else (os.cpu_count() or 1)
-    with warnings.catch_warnings():  # the scheduler's health endpoint moves off 8787 if that is taken
+    with warnings.catch_warnings(), dask.config.set(WORKER_CONFIG):  # (the nannies pass it to their workers)
+        # the scheduler's health endpoint moves off 8787 if that is taken
         warnings.filterwarnings("ignore", message=r"Port \d+ is already in use")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, silence_logs=logging.ERROR)
@@ -971,42 +981,43 @@ def _dask_client(workers: Optional[int], scheduler: Optional[str]):
     return client, cluster, n, f"local cluster ({n} worker process{'es' if n != 1 else ''})"
 
 
-def _chunks(items: list, batch: int) -> list:
-    return [items[i:i + batch] for i in range(0, len(items), batch)]
+def _batch_arg(text) -> Any:
+    """``--batch``: ``"auto"`` or a whole number ≥ 1 (SweepError otherwise)."""
+    if str(text).strip().lower() == "auto":
+        return "auto"
+    try:
+        n = int(text)
+    except (TypeError, ValueError):
+        n = 0
+    if n < 1:
+        raise SweepError(f"--batch {text}: must be a whole number ≥ 1 or auto")
+    return n
 
 
-def _execute(payload: dict, items: list, client, batch: int, on_rows: Callable, worker_addrs=None) -> None:
-    """Run ``items`` ([(run_id, values)]) in chunks of ``batch`` on the client (or in-process if None)."""
-    chunks = _chunks(items, max(1, int(batch)))
+def _execute(payload: dict, items: list, client, batch, on_rows: Callable, worker_addrs=None):
+    """Run ``items`` ([(run_id, values)]) on the client (in this process if None, one variant after the other):
+    ``batch`` variants per task, or tasks sized as they are sent (``"auto"``, :func:`gyro_sim.sweep_tasks.
+    run_adaptive`; returns its sizer)."""
     if client is None:
-        for ch in chunks:
-            on_rows(run_chunk(payload, ch))
-        return
-    from distributed import as_completed
+        for it in items:
+            on_rows(run_chunk(payload, [it]))
+        return None
+    from .sweep_tasks import run_adaptive, run_fixed
 
     pl = client.scatter([payload], broadcast=True, hash=False)[0]  # once per worker, not once per task
-    kw = {"workers": worker_addrs, "allow_other_workers": False} if worker_addrs else {}
-    futs = client.map(run_chunk, [pl] * len(chunks), chunks, pure=False, **kw)
-    index = {f.key: ch for f, ch in zip(futs, chunks)}
-    try:
-        for fut in as_completed(futs):
-            try:
-                rows = fut.result()
-            except Exception as e:  # noqa: BLE001 - e.g. a worker that died (KilledWorker)
-                rows = [{"run_id": rid, "status": "failed", "error": f"task failed: {type(e).__name__}: {e}",
-                         "metrics": {}, "series": {}, "wall_time_run": 0.0, "worker": ""} for rid, _ in index[fut.key]]
-            fut.release()
-            on_rows(rows)
-    finally:
-        for f in futs:
-            f.cancel()
+    if batch == "auto":
+        return run_adaptive(client, run_chunk, pl, items, on_rows, worker_addrs=worker_addrs)
+    run_fixed(client, run_chunk, pl, items, int(batch), on_rows, worker_addrs=worker_addrs)
+    return None
 
 
 def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Optional[int] = None,
-              scheduler: Optional[str] = None, batch: int = 1, resume: bool = True, retry_failed: bool = False,
+              scheduler: Optional[str] = None, batch="auto", resume: bool = True, retry_failed: bool = False,
               progress: bool = True) -> SweepResult:
     """Run every variant of ``spec``: validated first, then as Dask tasks (``workers`` = 0: in this
-    process), skipping the runs ``out`` already holds. Writes ``out`` (Parquet) if given."""
+    process), skipping the runs ``out`` already holds. Writes ``out`` (Parquet) if given. ``batch``: variants
+    per task, or ``"auto"``: each task sized as it is sent (:mod:`gyro_sim.sweep_tasks`); the results do not
+    depend on it."""
     t_start = time.perf_counter()
     variants = spec.variants()
     by_id = {v.run_id: v for v in variants}
@@ -1069,8 +1080,10 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
                 client, cluster, res.workers, res.mode = _dask_client(workers, scheduler)
                 res.startup = time.perf_counter() - t0
             t0 = time.perf_counter()
-            _execute(payload, items, client, batch, on_rows)
+            sizer = _execute(payload, items, client, batch, on_rows)
             res.wall = time.perf_counter() - t0
+            res.tasks = (len(sizer.sizes) if sizer is not None else
+                         len(items) if client is None else math.ceil(len(items) / int(batch)))
     except KeyboardInterrupt:
         res.interrupted = True
         res.wall = time.perf_counter() - t_start
@@ -1211,19 +1224,54 @@ def plot_sweep(rows: list, meta: dict, png: str | Path, metrics: Optional[Sequen
 # ------------------------------------------------------------------------------------------
 # measuring the execution (runs/s, scaling, overhead per task, batched path)
 # ------------------------------------------------------------------------------------------
-def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int] = None,
-            noop_tasks: int = 400, scheduler: Optional[str] = None, stream=None) -> dict:
-    """Time the sweep's runs four ways and the bare task overhead; returns (and prints) the figures.
+#: the Dask configurations :func:`measure` can time: label → (workers: "one" | "all", variants per task or "auto")
+MEASURE_CONFIGS = {"one_worker": ("one", 1), "all_workers": ("all", 1), "batched": ("all", None),
+                   "one_worker_auto": ("one", "auto"), "all_workers_auto": ("all", "auto")}
 
-    in-process serial (no Dask); Dask with 1 worker, one task per run; Dask with all workers, one task
-    per run; Dask with all workers, ``batch`` runs per task (default: an even split, 4 tasks per
-    worker). Workers are warmed first (simulator imported, kernels loaded); cluster start is reported
-    apart. Overhead per task = (workers × wall − Σ run time in the workers)/tasks, and the round trip
-    of ``noop_tasks`` empty tasks."""
+
+def _timed_rows(payload: dict, items: list, client, batch, worker_addrs=None) -> tuple:
+    """(wall s, rows, tasks) of one pass over ``items``."""
+    rows: list = []
+    t0 = time.perf_counter()
+    sizer = _execute(payload, items, client, batch, rows.extend, worker_addrs=worker_addrs)
+    wall = time.perf_counter() - t0
+    tasks = len(items) if client is None else (len(sizer.sizes) if sizer is not None
+                                               else math.ceil(len(items) / int(batch)))
+    return wall, rows, tasks
+
+
+def _pass_figures(n: int, wall: float, rows: list, tasks: int, workers: int) -> dict:
+    """runs/s, the mean cost of a run (wall and this thread's CPU, s) and the overhead per task of one pass."""
+    run_sum = sum(r["wall_time_run"] for r in rows)
+    o = {"wall": wall, "runs_per_s": n / wall, "tasks": tasks, "run_sum": run_sum,
+         "cpu_sum": sum(r.get("cpu_time_run", 0.0) for r in rows), "failed": sum(1 for r in rows if r["status"] != "ok"),
+         "workers": workers}
+    o["run_wall"], o["run_cpu"] = o["run_sum"] / n, o["cpu_sum"] / n
+    o["overhead_per_task"] = (workers * wall - run_sum) / tasks
+    return o
+
+
+def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int] = None,
+            noop_tasks: int = 400, scheduler: Optional[str] = None, stream=None,
+            configs: Sequence[str] = tuple(MEASURE_CONFIGS), repeats: int = 1,
+            each_round: Optional[Callable] = None) -> dict:
+    """Time the sweep's runs in this process and on Dask, and the bare task overhead; returns (and prints) the
+    figures.
+
+    In this process one after the other (no Dask), before the cluster starts and again after it is closed
+    (``serial``: their mean; a drifting load shows as their difference); then each of ``configs``
+    (:data:`MEASURE_CONFIGS`): 1 worker or all workers, one task per run, ``batch`` runs per task (``batched``;
+    default: an even split, 4 tasks per worker) or tasks sized as they are sent (``*_auto``, the default of
+    ``run_sweep``). Workers are warmed first (simulator imported, kernels loaded); cluster start is reported
+    apart. For each: runs/s, the speed-up over this process, the mean cost of a run inside the worker (wall and
+    CPU of its thread, ``run_wall``, ``run_cpu``) against in-process, and the overhead per task = (workers × wall −
+    Σ run time in the workers) / tasks; then the round trip of ``noop_tasks`` empty tasks (0: skipped). ``repeats``:
+    passes of each, the configurations taking turns, the fastest kept (the one a busy machine disturbed least);
+    ``each_round()``, if given, is called after each round's passes (the cluster idle) and its returns are kept in
+    ``out["rounds"]`` (e.g. another measurement that should meet the same load)."""
     stream = stream or sys.stdout
-    variants = [v for v in spec.variants()]
     items = []
-    for v in variants:
+    for v in spec.variants():
         try:
             spec.scene_for(v.values)
             items.append((v.run_id, v.values))
@@ -1231,67 +1279,104 @@ def measure(spec: SweepSpec, workers: Optional[int] = None, batch: Optional[int]
             pass
     if not items:
         raise SweepError("no valid variant to measure")
+    unknown = [c for c in configs if c not in MEASURE_CONFIGS]
+    if unknown:
+        raise SweepError(f"measure: unknown configuration(s) {unknown}; allowed: {', '.join(MEASURE_CONFIGS)}")
+    n = len(items)
     payload = spec.payload()
-    out: dict = {"runs": len(items)}
+    out: dict = {"runs": n, "repeats": max(1, int(repeats))}
     run_chunk(payload, items[:1])  # warm-up: imports, compiled kernels, first-call costs
-    t0 = time.perf_counter()
-    rows = []
-    _execute(payload, items, None, 1, rows.extend)
-    out["serial_wall"] = time.perf_counter() - t0
-    out["serial_run_sum"] = sum(r["wall_time_run"] for r in rows)
+    rounds = max(1, int(repeats))
+
+    def one_pass(client, bb, ws=None, workers_=1):
+        return _pass_figures(n, *_timed_rows(payload, items, client, bb, worker_addrs=ws), workers=workers_)
+
+    def fastest(passes):
+        return max(passes, key=lambda o: o["runs_per_s"])
+
+    before = fastest([one_pass(None, 1) for _ in range(rounds)])
     t0 = time.perf_counter()
     client, cluster, nw, mode = _dask_client(workers, scheduler)
     out["mode"], out["workers"] = mode, nw
+    b = batch or max(1, math.ceil(n / (4 * nw)))
+    out["batch"] = b
     try:
         client.run(run_chunk, payload, items[:1])  # the same warm-up in every worker
         out["startup"] = time.perf_counter() - t0
         addrs = sorted(client.scheduler_info()["workers"])
-        b = batch or max(1, math.ceil(len(items) / (4 * nw)))
-        out["batch"] = b
-        for label, ws, bb in (("one_worker", addrs[:1], 1), ("all_workers", None, 1), ("batched", None, b)):
-            rows = []
+        passes: dict = {label: [] for label in configs}
+        out["rounds"] = []
+        for _ in range(rounds):  # (the configurations in turn: a load that changes meets them all)
+            for label in configs:
+                which, bb = MEASURE_CONFIGS[label]
+                ws = addrs[:1] if which == "one" else None
+                passes[label].append(one_pass(client, bb or b, ws, 1 if ws else nw))
+            if each_round is not None:
+                out["rounds"].append(each_round())
+        for label in configs:
+            out[label] = fastest(passes[label])
+        if noop_tasks:
             t0 = time.perf_counter()
-            _execute(payload, items, client, bb, rows.extend, worker_addrs=ws)
-            wall = time.perf_counter() - t0
-            nfail = sum(1 for r in rows if r["status"] != "ok")
-            out[label] = {"wall": wall, "runs_per_s": len(items) / wall, "tasks": math.ceil(len(items) / bb),
-                          "run_sum": sum(r["wall_time_run"] for r in rows), "failed": nfail,
-                          "workers": 1 if ws else nw}
-            o = out[label]
-            o["overhead_per_task"] = (o["workers"] * wall - o["run_sum"]) / o["tasks"]
-        t0 = time.perf_counter()
-        futs = client.map(_noop, range(noop_tasks), pure=False)
-        client.gather(futs)
-        out["noop_per_task"] = (time.perf_counter() - t0) / noop_tasks
-        del futs
+            futs = client.map(_noop, range(noop_tasks), pure=False)
+            client.gather(futs)
+            out["noop_per_task"] = (time.perf_counter() - t0) / noop_tasks
+            del futs
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    one, allw, bat = out["one_worker"], out["all_workers"], out["batched"]
-    out["scaling_efficiency"] = allw["runs_per_s"] / (nw * one["runs_per_s"])
-    out["batched_speedup"] = bat["runs_per_s"] / allw["runs_per_s"]
-    serial_rate = len(items) / out["serial_wall"]
-    out["serial_runs_per_s"] = serial_rate
-
-    def line(label, o, extra=""):
-        return (f"  {label:<34s}{o['runs_per_s']:9.2f} runs/s  {o['wall']:7.2f} s  {o['tasks']:5d} tasks  "
-                f"overhead {o['overhead_per_task'] * 1e3:7.2f} ms/task{extra}")
-
-    lines = [
-        f"measured on {os.cpu_count()} cores, {mode}: {len(items)} runs of sweep {spec.name} "
-        f"(mean run {out['serial_run_sum'] / len(items) * 1e3:.2f} ms in-process)",
-        f"  cluster start + connect + warm-up {out['startup']:9.2f} s (not in the figures below)",
-        f"  in-process, serial (no Dask)      {serial_rate:9.2f} runs/s  {out['serial_wall']:7.2f} s",
-        line("Dask, 1 worker, 1 run per task", one),
-        line(f"Dask, {nw} workers, 1 run per task", allw,
-             f"  speed-up {allw['runs_per_s'] / one['runs_per_s']:.2f}, efficiency {out['scaling_efficiency']:.2f}"),
-        line(f"Dask, {nw} workers, {b} runs per task", bat, f"  batched speed-up {out['batched_speedup']:.2f}x"),
-        f"  empty task round trip             {out['noop_per_task'] * 1e3:9.2f} ms/task ({noop_tasks} tasks)",
-        "  (overhead per task = (workers x wall - run time in the workers) / tasks)",
-    ]
-    stream.write("\n".join(lines) + "\n")
+    after = fastest([one_pass(None, 1) for _ in range(rounds)])
+    out["serial_before"], out["serial_after"] = before, after
+    out["serial"] = serial = {k: (before[k] + after[k]) / 2 for k in ("wall", "run_wall", "run_cpu")}
+    serial["runs_per_s"] = n / serial["wall"]
+    out["serial_wall"], out["serial_run_sum"] = serial["wall"], serial["run_wall"] * n
+    out["serial_runs_per_s"] = serial["runs_per_s"]
+    for label in configs:
+        o = out[label]
+        o["speedup"] = o["runs_per_s"] / serial["runs_per_s"]  # over this process
+        o["run_wall_ratio"] = o["run_wall"] / serial["run_wall"]  # a run's cost in a worker / in-process
+        o["run_cpu_ratio"] = o["run_cpu"] / serial["run_cpu"] if serial["run_cpu"] > 0 else math.nan
+    if "one_worker" in out and "all_workers" in out:
+        out["scaling_efficiency"] = out["all_workers"]["runs_per_s"] / (nw * out["one_worker"]["runs_per_s"])
+    if "all_workers" in out and "batched" in out:
+        out["batched_speedup"] = out["batched"]["runs_per_s"] / out["all_workers"]["runs_per_s"]
+    stream.write("\n".join(measure_lines(out, spec.name)) + "\n")
     return out
+
+
+def measure_lines(out: dict, name: str = "") -> list:
+    """The printed report of :func:`measure`."""
+    n, nw, serial = out["runs"], out["workers"], out["serial"]
+    titles = {"one_worker": "Dask, 1 worker, 1 run per task", "all_workers": f"Dask, {nw} workers, 1 run per task",
+              "batched": f"Dask, {nw} workers, {out['batch']} runs per task",
+              "one_worker_auto": "Dask, 1 worker, auto batch", "all_workers_auto": f"Dask, {nw} workers, auto batch"}
+    lines = [
+        f"measured on {os.cpu_count()} cores, {out['mode']}: {n} runs of sweep {name} "
+        f"(mean run {serial['run_wall'] * 1e3:.2f} ms in-process)"
+        + (f"; the fastest of {out['repeats']} passes each" if out.get("repeats", 1) > 1 else ""),
+        f"  cluster start + connect + warm-up {out['startup']:9.2f} s (not in the figures below)",
+        f"  {'in-process, serial (no Dask)':<34s}{serial['runs_per_s']:9.2f} runs/s  {serial['wall']:7.2f} s  "
+        f"(before the cluster {out['serial_before']['runs_per_s']:.2f}, after {out['serial_after']['runs_per_s']:.2f}); "
+        f"a run {serial['run_wall'] * 1e3:.2f} ms wall, {serial['run_cpu'] * 1e3:.2f} ms CPU",
+    ]
+    for label, title in titles.items():
+        if label not in out:
+            continue
+        o = out[label]
+        extra = ""
+        if label == "all_workers" and "scaling_efficiency" in out:
+            extra = f"  efficiency {out['scaling_efficiency']:.2f}"
+        if label == "batched" and "batched_speedup" in out:
+            extra = f"  batched speed-up {out['batched_speedup']:.2f}x"
+        lines.append(f"  {title:<34s}{o['runs_per_s']:9.2f} runs/s  {o['wall']:7.2f} s  {o['tasks']:5d} tasks  "
+                     f"x{o['speedup']:.2f} of in-process  a run {o['run_wall'] * 1e3:.2f} ms wall "
+                     f"({o['run_wall_ratio']:.2f}x), {o['run_cpu'] * 1e3:.2f} ms CPU ({o['run_cpu_ratio']:.2f}x)  "
+                     f"overhead {o['overhead_per_task'] * 1e3:.2f} ms/task{extra}")
+    if "noop_per_task" in out:
+        lines.append(f"  empty task round trip             {out['noop_per_task'] * 1e3:9.2f} ms/task")
+    lines.append("  (a run's cost: mean over the runs, inside the worker, against in-process; "
+                 "overhead per task = (workers x wall - run time in the workers) / tasks)")
+    return lines
 
 
 # ------------------------------------------------------------------------------------------
@@ -1327,8 +1412,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="local Dask worker processes (default: all cores); 0 = run in this process without Dask")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="an existing Dask scheduler (tcp://host:port or a scheduler file) instead of a local cluster")
-    p.add_argument("--batch", metavar="N", type=int, default=1,
-                   help="variants per task (the batched path; default 1 = one task per run)")
+    p.add_argument("--batch", metavar="N|auto", default="auto",
+                   help="variants per task; auto (default): each task sized to last about 0.25 s at the run time "
+                        "seen so far, the tasks shrinking towards the end so the workers finish together")
     p.add_argument("--out", metavar="FILE", type=Path, default=None,
                    help="results table (default runs/sweep_<name>.parquet; the plot goes beside it as .png)")
     p.add_argument("--no-resume", action="store_true", help="run everything again (default: skip what FILE holds)")
@@ -1336,7 +1422,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plot", action="store_true", help="no PNG")
     p.add_argument("--dry-run", action="store_true", help="list and validate the variants; run nothing")
     p.add_argument("--measure", action="store_true",
-                   help="time the runs with 1 worker, all cores, batched, and the overhead per task (no results file)")
+                   help="time the runs in this process, with 1 worker and all cores (1 run per task, N per task, "
+                        "auto), the overhead per task and a run's cost in a worker (no results file)")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no table")
     return p
 
@@ -1417,8 +1504,7 @@ def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
             return EXIT_OK
         spec = load_sweep(args.source)
         spec = _apply_cli(spec, args)
-        if args.batch < 1:
-            raise SweepError(f"--batch {args.batch}: must be ≥ 1")
+        args.batch = _batch_arg(args.batch)
         if args.workers is not None and args.workers < 0:
             raise SweepError(f"--workers {args.workers}: must be ≥ 0")
         variants = spec.variants()
@@ -1436,7 +1522,7 @@ def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
                                + ", ".join(m.spec for m in spec.metrics) + "\n")
             return EXIT_OK
         if args.measure:
-            measure(spec, workers=args.workers or None, batch=args.batch if args.batch > 1 else None,
+            measure(spec, workers=args.workers or None, batch=args.batch if args.batch != "auto" else None,
                     scheduler=args.scheduler)
             return EXIT_OK
         out = args.out or Path("runs") / f"sweep_{spec.name}.parquet".replace("sweep_sweep_", "sweep_")
@@ -1452,7 +1538,8 @@ def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
     _write(sys.stdout,
            f"sweep {spec.name}: {res.n_total} variants ({res.n_run} run now, {res.n_skipped} from {res.out}), "
            f"{res.n_failed} failed, {res.n_invalid} invalid; {res.wall:.2f} s{rate}"
-           + (f" on {res.mode}" if res.mode else "") + "\n")
+           + (f" on {res.mode}" if res.mode else "")
+           + (f" in {res.tasks} tasks" if res.workers and res.mode != "in-process" and res.tasks else "") + "\n")
     _write(sys.stdout, f"results: {res.out}\n")
     if not args.no_plot and res.rows:
         png = plot_sweep(res.rows, meta, res.out.with_suffix(".png"))

@@ -312,3 +312,36 @@ def test_baseline_sweep_stops_at_the_reference_floor(monkeypatch):
     swept = [c for c in calls if c[1] != cfg.rtol_ref]
     assert swept == [(m, cfg.rtols[0]) for m in cfg.baselines]
     assert any("tighter" in n or "not run" in n for n in res.notes)
+
+
+def test_startup_and_sweep_parts(tmp_path):
+    """The startup part times every case as new processes, this code and a baseline tree (here the repo itself, put
+    on PYTHONPATH), with numba's cache warm (the untimed first process fills it); the sweep part measures runs/s in
+    this process, on 1 and 2 workers and in two plain processes, with the same results; both parts' tables and
+    headline sentences are written."""
+    from pathlib import Path
+
+    from gyro_sim import bench_scaling
+
+    repo = Path(__file__).resolve().parents[1]
+    res = type("R", (), {"startup": [], "sweep": []})()
+    res.startup = bench_scaling.startup_times({"before": str(repo), "this code": None}, repeats=1, duration=0.05)
+    cases = [c for c, _ in bench_scaling.STARTUP_CASES]
+    assert sorted((r["tree"], r["case"]) for r in res.startup) == sorted(
+        (t, c) for t in ("before", "this code") for c in cases)
+    for r in res.startup:
+        assert 0 < r["min"] <= r["median"] and r["repeats"] == 1
+        if r["case"].startswith("first run"):
+            assert r["compile_s"] == 0 and r["first_s"] > 0 and r["again_s"] > 0 and r["import_s"] > 0
+    for r in res.startup:
+        r["load"] = "–"
+    bench_scaling.sweep_part(res, runs=8, say=lambda s: None)
+    (row,) = res.sweep
+    m = row["measure"]
+    for k in bench_scaling.SWEEP_CONFIGS:
+        assert m[k]["failed"] == 0 and m[k]["runs_per_s"] > 0 and m[k]["run_cpu_ratio"] > 0
+    assert row["two_processes"]["ok"] == 8 and row["two_processes"]["runs_per_s"] > 0
+    md = "\n".join(bench_scaling.markdown(res))
+    assert "## Start-up of a process" in md and "## Sweep scaling" in md and "auto batch" in md
+    assert any("start-up" in s for s in bench_scaling.headline(res))
+    assert any("sweep of 8 runs" in s for s in bench_scaling.headline(res))

@@ -277,7 +277,8 @@ def test_cli(tmp_path, capsys):
                       (["nutation_oblate", "--metric", "final(nope)"], "unknown quantity"),
                       (["nutation_oblate", "--random", "initial.theta=uniform(0,1)"], "samples"),
                       (["no_such_scene"], "no such file"),
-                      (["nutation_oblate", "--batch", "0"], "--batch")):
+                      (["nutation_oblate", "--batch", "0"], "--batch"),
+                      (["nutation_oblate", "--batch", "some"], "--batch")):
         assert sw.sweep_main(argv) == 2
         err = capsys.readouterr().err
         assert err.startswith("error: ") and msg in err and err.count("\n") == 1, err
@@ -349,6 +350,67 @@ def test_batched_path_gives_the_same_numbers(reference):
     spec, serial, _ = reference
     batched = sw.run_sweep(spec, workers=2, batch=5, progress=False)
     assert metric_table(batched) == metric_table(serial)
+    assert batched.tasks == 3  # (12 variants, 5 per task)
+
+
+def test_tasks_are_batched_by_default():
+    """``run_sweep``'s default (batch="auto") sends several variants per task once run times are known, and gives
+    the numbers of one task per run and of this process bit for bit. (40 variants: the first task of each worker
+    thread has one, and a fresh worker's first run, which loads the kernels, is slow; once five run times are known
+    their median is a run's, ≤ 0.125 s, and a task gets at least two of the ≥ 31 variants left.)"""
+    spec = tiny(vary={"controller.period": "0.001:0.006:40"}, metrics={"th": "final(theta_deg)", "sf": "final_spin"})
+    serial = sw.run_sweep(spec, workers=0, progress=False)
+    auto = sw.run_sweep(spec, workers=2, progress=False)
+    one_each = sw.run_sweep(spec, workers=2, batch=1, progress=False)
+    print(f"\n  40 variants: {auto.tasks} tasks by default, {one_each.tasks} one per run")
+    assert serial.tasks == 40 and one_each.tasks == 40 and 1 < auto.tasks < 40
+    assert metric_table(auto) == metric_table(one_each) == metric_table(serial)
+    assert all(r["status"] == "ok" for r in serial.rows)
+
+
+def test_task_sizer():
+    """Variants per task: 1 until a run time is known; then TASK_SECONDS / the median run time, at most an even
+    share of what is left over TASKS_AHEAD tasks per worker thread, never more than is left."""
+    from gyro_sim.sweep_tasks import TASKS_AHEAD, TaskSizer
+
+    t = TaskSizer(slots=2, task_seconds=0.25)
+    assert t.next_size(128) == 1 and t.next_size(0) == 0
+    t.note([{"status": "ok", "wall_time_run": x} for x in (0.01, 0.012, 0.3)]  # a first run: the median ignores it
+           + [{"status": "failed", "wall_time_run": 5.0}, {"status": "ok", "wall_time_run": 0.0}])
+    assert t.run_seconds() == 0.012
+    assert t.next_size(1000) == int(0.25 / 0.012) == 20
+    assert t.next_size(40) == 40 // (TASKS_AHEAD * 2) == 10  # the tail shrinks: the workers finish together
+    assert t.next_size(1) == 1
+    slow = TaskSizer(slots=2)
+    slow.note([{"status": "ok", "wall_time_run": 2.0}])
+    assert slow.next_size(100) == 1  # runs longer than a task: one each
+    t.note([{"status": "ok", "wall_time_run": 0.001}] * 300)  # the latest run times rule
+    assert t.run_seconds() == 0.001 and t.next_size(10_000) == 250
+
+
+def test_kernels_called_from_python_release_the_gil():
+    """The compiled kernels a run calls from Python release the GIL (``nogil=True``): in a Dask worker the event
+    loop's thread then takes it without making the run's thread give it up (a run cost 2–5 % more CPU in a worker
+    than in-process with them holding it, the same without)."""
+    from gyro_sim import frozen_flow, kernels
+
+    for k in (kernels.integrate, kernels.integrate_free, kernels.record_sample, frozen_flow.integrate_frozen):
+        assert k.targetoptions.get("nogil") is True, k.py_func.__name__
+
+
+def test_local_cluster_workers_run_without_the_profiler():
+    """Dask's statistical profiler samples the running task's stack every 10 ms from a thread of the worker (5–6 %
+    of a core besides the runs): the local cluster's workers have it off."""
+    import dask
+
+    client, cluster, n, _ = sw._dask_client(1, None)
+    try:
+        on = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
+        assert n == 1 and list(on.values()) == [False]
+    finally:
+        client.close()
+        cluster.close()
+    assert dask.config.get("distributed.worker.profile.enabled") is True  # (this process's setting untouched)
 
 
 @pytest.fixture
@@ -422,7 +484,17 @@ def test_measure_reports_the_figures(capsys):
     with capsys.disabled():
         print("\n" + text)
     assert out["workers"] == 2 and out["runs"] == 24 and out["batch"] == 3
-    for k in ("one_worker", "all_workers", "batched"):
-        assert out[k]["runs_per_s"] > 0 and out[k]["failed"] == 0
+    for k in sw.MEASURE_CONFIGS:
+        o = out[k]
+        assert o["runs_per_s"] > 0 and o["failed"] == 0 and o["speedup"] > 0
+        assert o["run_wall"] > 0 and o["run_cpu"] > 0 and o["run_wall_ratio"] > 0 and o["run_cpu_ratio"] > 0
+    assert out["one_worker"]["tasks"] == out["all_workers"]["tasks"] == 24 and out["batched"]["tasks"] == 8
+    assert 1 < out["all_workers_auto"]["tasks"] < 24
+    assert out["serial"]["run_cpu"] > 0 and out["serial_before"]["runs_per_s"] > 0 and out["serial_after"]["runs_per_s"] > 0
     assert 0 < out["scaling_efficiency"] < 1.5 and out["batched_speedup"] > 0 and out["noop_per_task"] > 0
-    assert "efficiency" in text and "batched speed-up" in text
+    assert "efficiency" in text and "batched speed-up" in text and "auto batch" in text and "ms CPU" in text
+    part = sw.measure(spec, workers=1, noop_tasks=0, configs=("one_worker_auto",), repeats=2, each_round=lambda: 7)
+    assert set(sw.MEASURE_CONFIGS) & set(part) == {"one_worker_auto"} and "noop_per_task" not in part
+    assert part["repeats"] == 2 and part["rounds"] == [7, 7] and "fastest of 2 passes" in capsys.readouterr().out
+    with pytest.raises(sw.SweepError, match="unknown configuration"):
+        sw.measure(spec, workers=1, configs=("three_workers",))
