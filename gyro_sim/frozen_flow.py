@@ -69,7 +69,7 @@ def torque_scale(Bre, Bim, om, L, Jt, Ja, e_a, c_m, w, tau, tail) -> float:
     (the free motion of the module docstring), the part P_m(l̂) a of each phasor a (``Bre`` − i ``Bim``, T, rate
     ``om`` rad/s) meets the conductor at the body-frame frequencies f = ν − m Ω_p − m₂ Ω_r (m, m₂ ∈ {−1, 0, 1}),
     where its dissipative response is g(f) = Σ_n |w_n| |f|τ_n/(1 + (fτ_n)²) + T_tail|f| (at most ½Σ|w_n| + T_tail|f|:
-    the bound :meth:`gyro_sim.simulate.Simulator._frozen_flow_step` takes at the largest slip). Returns
+    the bound :meth:`gyro_sim.simulate.Simulator._torque_time` takes at the largest slip). Returns
     c (Σ_k |a_k|) Σ_k Σ_m |P_m(l̂) a_k| max_m₂ g(f): an upper bound of the mean torque now, which falls with the
     slip as a spin-up nears the field's rate and with the transverse field seen as a nutation is damped."""
     Lm = float(np.linalg.norm(L))

@@ -563,20 +563,21 @@ class Simulator:
             h = min(h, self.scene.integrator.max_step)
         return h
 
-    def _local_torque_scale(self, Bre: np.ndarray, Bim: np.ndarray) -> float:
+    def _local_torque_scale(self, ax: int) -> float:
         """Mean torque scale (N m) at the present slips (:func:`gyro_sim.frozen_flow.torque_scale`) for an
-        axisymmetric or isotropic rotor."""
-        ax = frozen_flow.supported(self.J)
+        axisymmetric or isotropic rotor with symmetry axis ``ax`` (:func:`gyro_sim.frozen_flow.supported`)."""
         Jt, Ja = float(self.J[(ax + 1) % 3]), float(self.J[ax])
         e_a = quat_to_matrix(self.y[3:7])[:, ax] if self.attitude and Jt != Ja else None
-        return frozen_flow.torque_scale(Bre, Bim, self.phasors()[2], self.y[0:3], Jt, Ja, e_a, self.c_m, self.w,
-                                        self.tau, self.tail)
+        return frozen_flow.torque_scale(*self.phasors(), self.y[0:3], Jt, Ja, e_a, self.c_m, self.w, self.tau,
+                                        self.tail)
+
     def _torque_time(self) -> float:
         """J_min Ω / N (s): the time the torque's scale N takes to change the fastest rate Ω by itself (inf without
         torque or rate). N: the mean torque at the present slips (:meth:`_local_torque_scale`), no larger than the
         bound c|B|²(½Σ|w_n| + T_tail(Ω + ν_max)) at the largest slip and no smaller than LOCAL_SCALE_MIN of it.
         Kept while the commands, the rates met, L and q are the same (a step plan asks for it for several knobs)."""
-        key = (self.current.tobytes(), self.rate.tobytes(), self._nu_max, *self.y[0:7].tolist())
+        # (q only where it is integrated: without attitude it is NaN, and NaN != NaN would never find the kept one)
+        key = (self.current.tobytes(), self.rate.tobytes(), self._nu_max, *self.y[0:7 if self.attitude else 3].tolist())
         kept = self.__dict__.get("_tt")
         if kept is not None and kept[0] == key:
             return kept[1]
@@ -588,12 +589,12 @@ class Simulator:
         om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * max(self.Jinv.tolist()),
                  self._nu_max, max((abs(f) for f in self.field_om.tolist()), default=0.0))
         N = self.c_m * B * B * (0.5 * sum(abs(v) for v in self.w.tolist()) + self.tail * (om + self._nu_max))
-        if N > 0 and self.w.size and frozen_flow.supported(self.J) >= 0:
+        ax = frozen_flow.supported(self.J)
+        if N > 0 and self.w.size and ax >= 0:
             # the mean torque at the present slips, no larger than the bound: a spin-up's step grows as its slip falls
             # (the eddy-mode models; qs_flow's plan and auto's choice of it were measured at the bound: on
             # nutation_slow the local scale made auto take qs_flow, whose ticks are not compiled, at 1.2x the cost)
-            Bre, Bim, _ = self.phasors()
-            N = min(N, max(self._local_torque_scale(Bre, Bim), frozen_flow.LOCAL_SCALE_MIN * N))
+            N = min(N, max(self._local_torque_scale(ax), frozen_flow.LOCAL_SCALE_MIN * N))
         tt = min(self.J.tolist()) * om / N if N > 0 and om > 0 else math.inf
         self._tt = (key, tt)
         return tt
@@ -1034,7 +1035,7 @@ class Runner:
             f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
             if f is not None:
                 sim.step_div *= f
-            if f is not None or method in ("frozen_flow", "qs_flow"):  # (their step follows the torque at the slip now)
+            if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
                 sim.replan()
                 sh.replan()
 
