@@ -754,7 +754,7 @@ def long_spinup(res: Results) -> None:
         est = r.error_estimate
         return {"method": method, "setting": setting, "duration": T, "wall": w, "cpu": c, "steps": int(r.steps),
                 "rtf": T / w, "rtf_cpu": T / c, "error": est.attitude if est is not None else float("nan"),
-                "error_L": final_error(r.L[-1], None, ref.L[-1], None), "estimate_L": est.L if est else float("nan"),
+                "error_L": final_error(r.L[-1], None, ref.L[-1], None), "estimate_L": est.L if est is not None else float("nan"),
                 "averaged": _averaged_time(r), "spin_rev_s": float(r.spin_rate[-1] / (2 * math.pi)),
                 "spin_fraction": float(r.spin_rate[-1] / target), "theta_deg": float(np.degrees(r.theta[-1]))}
 
