@@ -552,6 +552,7 @@ class Results:
     averaged: list = field(default_factory=list)  # dicts: scene, models, wall full/auto, final errors
     ros: list = field(default_factory=list)  # dicts of the ros part (bench_ros)
     ticks: list = field(default_factory=list)  # dicts of the per-tick part (bench_ticks)
+    output_rates: list = field(default_factory=list)  # dicts of its output-rate rows (bench_ticks.output_rate_part)
     startup: list = field(default_factory=list)  # dicts of the startup part (bench_scaling)
     sweep: list = field(default_factory=list)  # dicts of the sweep part (bench_scaling)
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
@@ -1038,9 +1039,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         write_outputs(res, Path(out))
         return res
     if cfg.only == "ticks":
-        from .bench_ticks import ticks_part
+        from .bench_ticks import output_rate_part, ticks_part
 
         ticks_part(res, quick=cfg.mode == "quick")
+        output_rate_part(res, quick=cfg.mode == "quick")
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
@@ -1066,9 +1068,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         savings(res)
         profile_kernels(res)
     if cfg.ticks:
-        from .bench_ticks import ticks_part
+        from .bench_ticks import output_rate_part, ticks_part
 
         ticks_part(res, quick=cfg.mode == "quick")
+        output_rate_part(res, quick=cfg.mode == "quick")
     if cfg.ros:
         from .bench_ros import ros_part
 
@@ -1357,9 +1360,11 @@ def markdown(res: Results) -> str:
                      for p in res.profile])
     from .bench_ros import markdown as ros_markdown
     from .bench_ticks import markdown_lines as ticks_markdown
+    from .bench_ticks import output_rate_lines
     from .bench_scaling import markdown as scaling_markdown
 
     L += ticks_markdown(res)
+    L += output_rate_lines(res)
     L += ros_markdown(res)
     L += scaling_markdown(res)
     if res.accuracy is not None:

@@ -13,12 +13,17 @@ CPU time (``time.process_time``, least of the repeats after a warm-up run) of
 each with the compiled tick loop (gyro_sim/ticks.py) and with the break-by-break Python loop
 (:func:`gyro_sim.ticks.python_ticks`) in the same process. Quick mode runs the default scene over 12 s (600 ticks)
 and leaves out the as-shipped ``nutation_slow``.
+
+Then what the output rate costs (:func:`output_rate_part`): the default scene without controller at output rates
+of 10 Hz to 10 kHz, as shipped and with the accuracy of L alone, each run's CPU against the 50 Hz run's, with the
+steps taken and the run's error estimate (a sample is a stop of the step: docs/benchmark.md says why there is no
+dense output).
 """
 from __future__ import annotations
 
 from typing import Optional
 
-__all__ = ["ticks_part", "markdown_lines"]
+__all__ = ["ticks_part", "output_rate_part", "markdown_lines"]
 
 #: (case, scene, overrides, duration s (None: the scene's), in quick mode too, the comparison without controller)
 CASES = (
@@ -29,6 +34,8 @@ CASES = (
     ("nutation_slow, fidelity auto, as shipped", "nutation_slow", {"fidelity": "auto"}, None, False, False),
 )
 QUICK_DEFAULT_DURATION = 12.0  # s of the default scene in quick mode
+OUTPUT_RATES = (10.0, 50.0, 1000.0, 10000.0)  # Hz: the output-rate rows (50 Hz is the scene's own, the reference)
+OUTPUT_RATE_DURATION = {"quick": 2.0, "full": 10.0}  # s of the default scene in the output-rate rows
 
 
 def ticks_part(res, quick: bool) -> None:
@@ -70,6 +77,56 @@ def ticks_part(res, quick: bool) -> None:
             res.ticks.append(v)
             _say(f"[ticks] {case} ({T:g} s), {v['run']}: CPU {v['cpu']:.4g} s ({v['cpu'] / T * 1e3:.3g} ms per "
                  f"simulated s), {v['steps']} steps" + (f"; {v['ratio']:.3g}x {v['ratio_of']}" if v["ratio"] else ""))
+
+
+def output_rate_part(res, quick: bool) -> None:
+    """Fill ``res.output_rates`` (dicts: accuracy, rate, duration, cpu, wall, steps, samples, est_L, est_att, ratio):
+    the default scene without controller at each of :data:`OUTPUT_RATES`, its CPU over the 50 Hz run's."""
+    from .bench import _say, _timed_warm
+    from .scene import load_scene
+    from .simulate import run
+
+    cfg = res.config
+    T = OUTPUT_RATE_DURATION["quick" if quick else "full"]
+    for acc, ov in (("as shipped (L 1e-6, attitude 1e-6 rad)", {}),
+                    ("L alone (attitude: null)", {"accuracy": {"attitude": None}})):
+        rows = []
+        for rate in OUTPUT_RATES:
+            scene = load_scene("spinup_thin_shell", overrides={"controller": None, "output.rate": rate, **ov})
+            wall, cpu, r, _ = _timed_warm(lambda: run(scene, duration=T), cfg.min_wall, cfg.max_reps)
+            est = r.error_estimate
+            rows.append({"accuracy": acc, "rate": rate, "duration": T, "cpu": cpu, "wall": wall, "steps": int(r.steps),
+                         "samples": int(r.t.size), "est_L": est.L if est else None,
+                         "est_att": est.attitude if est else None, "ratio": None})
+        ref = next(v for v in rows if v["rate"] == 50.0)
+        for v in rows:
+            v["ratio"] = v["cpu"] / ref["cpu"]
+            res.output_rates.append(v)
+            _say(f"[output rate] {acc}, {v['rate']:g} Hz ({T:g} s): CPU {v['cpu']:.4g} s, {v['steps']} steps, "
+                 f"{v['samples']} samples; {v['ratio']:.3g}x the 50 Hz run")
+
+
+def _est(x) -> str:
+    return "–" if x is None else f"{x:.2g}"
+
+
+def output_rate_lines(res) -> list:
+    """The output-rate table of bench.md ([] where the part did not run)."""
+    if not getattr(res, "output_rates", None):
+        return []
+    from .bench import _table
+
+    top = [v for v in res.output_rates if v["rate"] == max(OUTPUT_RATES)]
+    summary = "; ".join(f"{v['accuracy']}: {v['rate']:g} Hz costs {v['ratio']:.3g}x the 50 Hz run" for v in top)
+    return _table("## Output rate (default scene without controller; CPU against the 50 Hz run)",
+                  "accuracy | output Hz | duration s | CPU s | steps | samples | estimated error L, attitude rad | "
+                  "x 50 Hz (CPU)",
+                  [f"{v['accuracy']} | {v['rate']:g} | {v['duration']:g} | {v['cpu']:.4g} | {v['steps']} | "
+                   f"{v['samples']} | {_est(v['est_L'])}, {_est(v['est_att'])} | {v['ratio']:.3g}x"
+                   for v in res.output_rates],
+                  [summary + ". A sample is a stop of the step (every stepper): past the planned step's rate each "
+                   "sample costs a step, and the run is that much more accurate than its tolerance (docs/benchmark.md: "
+                   "why there is no dense output)."])
 
 
 def _row(v: dict) -> str:

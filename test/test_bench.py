@@ -235,6 +235,29 @@ def test_ticks_part_times_both_loops_on_the_same_runs():
     assert "against the Python break loop the compiled ticks run `nutation_slow" in md
 
 
+def test_output_rate_part_rows_against_the_50_hz_run(monkeypatch):
+    """The output-rate rows (issue 23): each rate as shipped and with the accuracy of L alone, its CPU over the 50 Hz
+    run's of the same accuracy, the samples the rate asks for, a sample a stop (never fewer steps than samples at
+    10 kHz); bench.md's table. (Over 0.2 s here: the part's own 2 s / 10 s are the benchmark's.)"""
+    from gyro_sim import bench_ticks
+    from gyro_sim.bench import markdown
+
+    monkeypatch.setitem(bench_ticks.OUTPUT_RATE_DURATION, "quick", 0.2)
+    res = Results(BenchConfig(mode="quick", min_wall=0.0, max_reps=1))
+    bench_ticks.output_rate_part(res, quick=True)
+    rows = res.output_rates
+    assert [v["rate"] for v in rows] == list(bench_ticks.OUTPUT_RATES) * 2
+    for v in rows:
+        ref = next(w for w in rows if w["accuracy"] == v["accuracy"] and w["rate"] == 50.0)
+        assert v["ratio"] == v["cpu"] / ref["cpu"] > 0
+        assert v["samples"] == int(round(0.2 * v["rate"])) + 1
+        if v["rate"] == 10000.0:
+            assert v["steps"] >= v["samples"] - 1
+    print("\n  " + "\n  ".join(f"{v['accuracy']}, {v['rate']:g} Hz: {v['steps']} steps, {v['ratio']:.3g}x" for v in rows))
+    md = markdown(res)
+    assert "## Output rate" in md and "10000 Hz costs" in md
+
+
 def test_bench_main_refuses_unknown_scene(tmp_path, capsys):
     assert bench_main(["--quick", "--out", str(tmp_path), "--scenes", "no_such_scene"]) == 2
     assert "error:" in capsys.readouterr().err
