@@ -78,6 +78,20 @@ setup(
             'colcon-ros>=0.5',
             'colcon-python-setup-py>=0.2.9',
             'colcon-package-information>=0.4',  # `colcon list`
+            'websockets>=12',  # the test client of the live view (Foxglove WebSocket protocol)
+        ],
+        # RunResult.to_dataframe() / to_xarray() (gyro_sim/results.py)
+        'data': [
+            'pandas>=2.0',
+            'xarray>=2024.1',
+        ],
+        # `gyro-sim run SCENE --live`: the run served over the Foxglove WebSocket protocol
+        'live': [
+            'foxglove-sdk>=0.14',
+        ],
+        # the API reference (docs/api, `gyro-sim api-docs`)
+        'docs': [
+            'pdoc>=14',
         ],
         # `gyro-sim sweep` (gyro_sim/sweep.py): runs on a Dask cluster (local or by scheduler
         # address), results as Parquet, progress bar. The core imports none of these.
