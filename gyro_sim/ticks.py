@@ -204,7 +204,7 @@ def stepper(sim, seg: tuple) -> tuple:
     """(Pf, Pz, Pa): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
     ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow or free, the others None; the
     argument types are advance's (numba compiles no new signature of the stepper)."""
-    from .simulate import _TABLEAU
+    from .simulate import _tableau
 
     t_seg, Bre, Bim, om, free, method, h_max = seg
     case = None if sim.attitude else True
@@ -214,7 +214,7 @@ def stepper(sim, seg: tuple) -> tuple:
                       1.0 / sim.tau, sim.eff, case), None
     if free:
         return None, None, (sim.Jinv, sim._inv_ref, sim._free_axis, sim.tau)
-    A, b, c = _TABLEAU[method]
+    A, b, c = _tableau(method)  # (made on first use: a tick loop may be a process's first lawson8 run)
     return (Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.lam, sim.eff, A, b, c, case), None, None
 
 
