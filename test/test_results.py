@@ -201,7 +201,7 @@ def test_repr_without_attitude_and_without_estimate(no_attitude):
 
 
 def test_repr_of_a_result_still_in_its_bag_reads_nothing(tmp_path):
-    """A streamed run too long to keep (keep_bytes=0): the repr takes the preview's final values, the bag is not read."""
+    """A streamed run too long to keep (keep_bytes=0): the repr takes the preview's finals; the bag is not read."""
     r = record_run(gyro_sim.load_scene(SCENE), tmp_path / "bag", duration=DURATION, keep_bytes=0)
     assert r.__dict__.get("_load") is not None
     text = repr(r)
