@@ -208,6 +208,28 @@ class RunResult:
         """Nutation angle θ (rad) between x3 and L."""
         return self.euler[:, 1]
 
+    def to_dataframe(self):
+        """The run as a pandas DataFrame: index ``t`` (s), one flat column per component (``L_x``, ``q_w``,
+        ``psi``, ``current_z1``, ...), units and frames in ``df.attrs`` (:func:`gyro_sim.results.to_dataframe`).
+        Needs the optional extra ``data`` (``pip install 'gyro_sim[data]'``)."""
+        from .results import to_dataframe
+
+        return to_dataframe(self)
+
+    def to_xarray(self):
+        """The run as an xarray Dataset: dims ``time`` (s), ``component`` (x, y, z), ``stator``, ...; units, frames
+        and the run's scene and error estimate as attrs (:func:`gyro_sim.results.to_xarray`). Needs the optional
+        extra ``data`` (``pip install 'gyro_sim[data]'``)."""
+        from .results import to_xarray
+
+        return to_xarray(self)
+
+    def __repr__(self) -> str:
+        # a few lines (scene, duration, samples, final values, error estimate), not the arrays
+        from .results import result_repr
+
+        return result_repr(self)
+
     def summary(self) -> dict:
         """Final values and cost of the run (SI units; θ in degrees, NaN without attitude; spin_rate: see
         :attr:`spin_rate`) and its estimated error (``error_L`` relative, ``error_attitude`` rad, NaN where not a
@@ -363,18 +385,66 @@ class Simulator:
         if not quiet and not is_legacy():
             self._warn_plan(om_plan)
 
+    # --- named views of the state -------------------------------------------------------------
+    @property
+    def L(self) -> np.ndarray:
+        """Angular momentum L now, (3,) N·m·s, case frame (a copy of y[0:3]: the state moves on)."""
+        return self.y[0:3].copy()
+
+    @property
+    def q(self) -> np.ndarray:
+        """Attitude quaternion now, (4,) (w, x, y, z) body → case (a copy of y[3:7]); NaN without attitude."""
+        return self.y[3:7].copy()
+
+    @property
+    def omega_b(self) -> np.ndarray:
+        """Angular velocity Ω_b now, (3,) rad/s, body frame, effects included (:meth:`body_rates`); without
+        attitude Ω = L/J in the case frame."""
+        return self.body_rates(self.t, self.y)[0]
+
+    @property
+    def euler(self) -> np.ndarray:
+        """Euler angles (ψ, θ, φ) now, (3,) rad, of the body in the L-frame; NaN without attitude."""
+        if not self.attitude:
+            return np.full(3, np.nan)
+        return euler_angles(quat_to_matrix(self.y[3:7]), self.y[0:3])
+
+    @property
+    def modes(self) -> np.ndarray:
+        """Eddy-mode states now, (3N,) T: e_1 (x, y, z), e_2, ... in the body frame (case frame without attitude),
+        laid out as a row of :attr:`RunResult.modes` (a copy; no columns where the scene has no eddy modes)."""
+        return self.y[7:7 + 3 * self.tau.size].copy()
+
     # --- commands --------------------------------------------------------------------------
-    def set_stator(self, k: int, current: Optional[float] = None, rate: Optional[float] = None) -> None:
-        """Command stator k from now on: current amplitude (A, ≥ 0) and signed field rate (rad/s).
+    def stator_index(self, stator) -> int:
+        """The index of a stator given by name (``'z1'``) or index (0 … k−1); anything else raises one
+        ValueError naming the value and the stator names."""
+        names = self.stator_names
+        if isinstance(stator, str) and stator in names:
+            return names.index(stator)
+        if not isinstance(stator, (str, bool)) and isinstance(stator, (int, np.integer)) \
+                and 0 <= int(stator) < len(names):
+            return int(stator)
+        allowed = (f"{', '.join(names)} (or an index 0–{len(names) - 1})" if names
+                   else "none (the scene has no stators)")
+        raise ValueError(f"stator {stator!r}: no such stator; allowed: {allowed}")
+
+    def set_stator(self, stator, current: Optional[float] = None, rate: Optional[float] = None) -> None:
+        """Command a stator from now on: current amplitude (A, ≥ 0) and signed field rate (rad/s). ``stator``: its
+        name (``'z1'``) or index (:meth:`stator_index`).
 
         A current step makes a field step ΔB; each eddy mode answers it instantly with its
         high-frequency limit (ĝ → −1), e_n → e_n − ΔB_b (:meth:`_field_step`).
         """
-        self.set_stators({k: (current, rate)})
+        self.set_stators({stator: (current, rate)})
 
     def set_stators(self, commands: dict) -> None:
-        """Command several stators at once, ``{k: (current A | None, rate rad/s | None)}``: one field step for all
-        the current changes (the result does not depend on the order the stators are named in)."""
+        """Command several stators at once, ``{stator: (current A | None, rate rad/s | None)}`` (a stator by name
+        or index): one field step for all the current changes (the result does not depend on the order the
+        stators are named in)."""
+        n = len(self.stator_names)
+        if not all(type(k) is int and 0 <= k < n for k in commands):  # (the Runner's: indices in range already)
+            commands = {self.stator_index(k): c for k, c in commands.items()}
         for k, (current, rate) in commands.items():
             if current is not None and not (math.isfinite(current) and current >= 0):
                 raise ValueError(f"stator {self.stator_names[k]!r}: current = {current}: must be finite and ≥ 0 A")
@@ -805,6 +875,14 @@ def kinetic_energy(J: np.ndarray, omega_b: np.ndarray) -> np.ndarray:
     return 0.5 * np.einsum("ni,i,ni->n", omega_b, J, omega_b)
 
 
+def output_times(scene: Scene, T: float, period: Optional[float] = None) -> tuple[np.ndarray, np.ndarray]:
+    """(output instants, tick instants), s, sorted, of a run of ``scene`` over ``T`` s: the scene's output grid with
+    a tick every ``period`` s (None: no ticks) merged in (a tick is exact: a sample within round-off is it). The
+    :class:`Runner`'s grid; a bag's reader maps the ns stamps back onto it (:func:`gyro_sim.results.read_bag`)."""
+    ticks = np.arange(int(math.ceil(T / period - 1e-9))) * period if period is not None else np.zeros(0)
+    return merge_times(scene.output.sample_times(T), ticks), ticks
+
+
 class Runner:
     """Advances a :class:`Simulator` break by break over a scene's duration, collecting the outputs.
 
@@ -858,15 +936,11 @@ class Runner:
         self._last_t = 0.0
         self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.Jinv))
         self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
-        t_out = scene.output.sample_times(T)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
         self.period = control_period or controller_period(scene)
-        ticks = (np.arange(int(math.ceil(T / self.period - 1e-9))) * self.period if self.period is not None
-                 else np.zeros(0))
-        self._ticks = ticks  # sorted, exact instants (s)
         # every controller tick is an output sample too: the controller (node) sees the published state
-        self.t_out = t_out = merge_times(t_out, ticks)  # a tick is exact: a sample within round-off is it
+        self.t_out, self._ticks = t_out, ticks = output_times(scene, T, self.period)
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
         fly = scene.effects.flywheel  # the kinks of its speed profile are breaks: steps never straddle one
         knots = {t for t in fly.profile.time if 0 < t < T} if fly is not None else set()

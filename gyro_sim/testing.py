@@ -281,76 +281,11 @@ def _start_figures(line: str) -> dict:
 
 def result_from_bag(bag, scene=None, duration: Optional[float] = None, control_period: Optional[float] = None):
     """A :class:`gyro_sim.simulate.RunResult` of a bag the simulator node recorded (a path, or its
-    :class:`~gyro_sim.recording.BagData`).
+    :class:`~gyro_sim.recording.BagData`): :func:`gyro_sim.read_bag` (gyro_sim/results.py), imported on first use
+    (this plugin loads in every pytest session)."""
+    from .results import read_bag
 
-    ``scene``: a Scene, a built-in name or a path (default: the scene text in the bag). The sample times are
-    the simulation's own grid (the Runner's, for ``duration`` and ``control_period`` as the node ran them;
-    defaults from the bag): the same bits as an in-process run, not the rounded ns stamps. ``energy`` is the
-    kinetic energy ½ Ω_b·J Ω_b of the scene's inertia; ``commands`` are those the bag holds (the controller's and
-    the watchdog's zeroing, as the node applied them: not the scene's initial settings); ``modes`` (eddy-mode
-    states, not recorded) has no columns; ``wall_time``, ``compile_time``, ``steps`` come from the bag's
-    custom data.
-    """
-    import numpy as np
-
-    from .messages import stamp_ns
-    from .recording import BagData, read_bag
-    from .scene import Scene, load_scene, parse_scene_text, scene_from_dict
-    from .simulate import RunResult, Runner, kinetic_energy
-
-    data = bag if isinstance(bag, BagData) else read_bag(bag)
-    if scene is None:
-        if not data.scene_text:
-            raise ValueError("result_from_bag: the bag holds no scene; give scene=")
-        scene = scene_from_dict(parse_scene_text(data.scene_text, "the bag's scene"), where="the bag's scene",
-                                default_name=data.scene_name or "scene")
-    elif not isinstance(scene, Scene):
-        scene = load_scene(scene)
-    custom = data.custom
-    if control_period is None and "gyro_sim.control_period" in custom:
-        try:
-            control_period = float(custom["gyro_sim.control_period"])
-        except (TypeError, ValueError):
-            control_period = None
-    # the times: the Runner's grid where its stamps are the bag's (always, for a run of this scene), else ns / 1e9
-    t = data.t_ns / 1e9
-    grid = {}
-    try:
-        r = Runner(scene, duration or None, attitude=True, control_period=control_period)
-        grid = {stamp_ns(x): x for x in r.t_out.tolist()}
-    except Exception:  # noqa: BLE001 - a scene the Runner will not take here: the stamps as they are
-        pass
-    if grid:
-        t = np.array([grid.get(int(ns), ns / 1e9) for ns in data.t_ns.tolist()], dtype=float)
-    command_t = np.array([grid.get(int(round(x * 1e9)), x) for x in data.command_t.tolist()], dtype=float)
-    names = list(data.stator_names)
-    commands = []
-    for i, tc in enumerate(command_t.tolist()):
-        cur, rate = data.command_current[i], data.command_rate[i]
-        cols = [j for j in range(len(names)) if not (math.isnan(cur[j]) and math.isnan(rate[j]))]
-        currents = [None if math.isnan(cur[j]) else float(cur[j]) for j in cols]
-        rates = [None if math.isnan(rate[j]) else float(rate[j]) for j in cols]
-        commands.append((tc, [names[j] for j in cols], None if all(c is None for c in currents) else currents,
-                         None if all(x is None for x in rates) else rates))
-    effects = {}
-    if "flywheel" in data.effects:
-        effects["flywheel_angle"] = data.effects["flywheel"][:, 0].copy()
-        effects["flywheel_speed"] = data.effects["flywheel"][:, 1].copy()
-    if all(f"damper_{a}" in data.effects for a in "xyz"):
-        effects["damper_offset"] = np.stack([data.effects[f"damper_{a}"][:, 0] for a in "xyz"], axis=1)
-        effects["damper_velocity"] = np.stack([data.effects[f"damper_{a}"][:, 1] for a in "xyz"], axis=1)
-
-    def number(key, kind=float):
-        try:
-            return kind(float(custom[key]))
-        except (KeyError, TypeError, ValueError):
-            return kind(0)
-
-    return RunResult(scene=scene, t=t, L=data.L, q=data.q, omega_b=data.omega_b, torque=data.torque,
-                     energy=kinetic_energy(scene.inertia, data.omega_b), stator_names=names, current=data.current,
-                     field_rate=data.rate, field_phase=data.phase, modes=np.zeros((t.size, 0)),
-                     wall_time=number("gyro_sim.wall_time"), compile_time=number("gyro_sim.compile_time"),
-                     steps=number("gyro_sim.steps", int), commands=commands, effects=effects, attitude=True)
+    return read_bag(bag, scene, duration=duration, control_period=control_period)
 
 
 @dataclass

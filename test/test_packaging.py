@@ -311,6 +311,7 @@ MODULE_KEYS = {
     "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "numba": "python3-numba",
     "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
     "mcap": None, "tqdm": "python3-tqdm", "dask": None, "distributed": None, "pyarrow": None,
+    "pandas": "python3-pandas", "xarray": None,
     "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
 }
 #: pip requirement of setup.py → rosdep key (ros-* wheels: the ROS package of that name)
@@ -319,6 +320,7 @@ PIP_KEYS = {
     "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
     "mcap": None, "pytest": "python3-pytest", "hypothesis": "python3-hypothesis", "mpmath": None,
     "mcap-ros2-support": "mcap-ros2-support", "dask": None, "pyarrow": None, "tqdm": "python3-tqdm",
+    "pandas": "python3-pandas", "xarray": None,
 }
 #: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
 #: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed
@@ -399,7 +401,8 @@ def test_manifest_declares_setup_requirements():
     pkg = manifest(ROOT / "package.xml")
     req = setup_requirements()
     run_deps, test_deps = names(pkg.exec_depends), names(pkg.test_depends)
-    for extra, deps in (("", run_deps), ("ros", run_deps), ("sweep", run_deps), ("test", test_deps)):
+    for extra, deps in (("", run_deps), ("ros", run_deps), ("sweep", run_deps), ("data", run_deps),
+                        ("test", test_deps)):
         for r in req[extra]:
             if extra == "test" and Requirement(r).name.startswith("colcon-"):
                 continue  # the build tool, not a dependency
