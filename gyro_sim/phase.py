@@ -1,6 +1,6 @@
-"""(θ, φ) phase portrait of a run over the averaged ψ-switching model of [K] §3 (PNG, Agg canvas).
+"""(θ, φ) phase portrait of a run over the averaged ψ-switching model of [K] §3 (a matplotlib Figure, Agg canvas).
 
-``plot_phase(result_or_bag_data, path, scene=None)`` draws
+``plot_phase(result_or_bag_data, path=None, scene=None) -> Figure`` (saved as PNG when given a path) draws
 
 * left: the run's trajectory in the (φ, θ) plane (θ = ``euler[:, 1]``, φ = ``euler[:, 2]``, in degrees;
   φ wrapped to [0°, 180°): (3.4) depends on φ only through sin 2φ, cos 2φ), coloured by time, over the

@@ -1,11 +1,19 @@
-"""Plots of a simulation run (PNG, matplotlib's Agg canvas; never opens a window).
+"""Plots of a simulation run: a ``matplotlib.figure.Figure`` on its own Agg canvas (no pyplot state, the
+backend left as it is, never a window); saved as PNG when given a path.
 
-``plot_run(result, path)`` draws three stacked panels on one time axis:
+``plot_run(result, path=None) -> Figure`` draws stacked panels on one time axis:
 
-1. spin rate Ω_b3 (body axis 3) in rev/s, with the magnitude |Ω| dashed;
+0. events: switching instants (a field reverses or a stator turns on/off) and command changes (``result.commands``);
+1. rotor rate in rev/s: spin Ω_b3 (about the polar axis x3) and the magnitude |Ω| dashed;
 2. nutation angle θ in degrees (a run without attitude, ``result.attitude`` False, has none: the panel
    says so and the spin panel shows |Ω| alone);
-3. stator current amplitudes in A, one line per stator.
+3. kinetic moment L in N·m·s, case frame (when the result has ``L``);
+4. stator current amplitudes in A, one step line per stator, each in its own style;
+5. field rate ν/2π in Hz (signed: the direction of rotation) and 6. slip (ν − Ω·u)/2π in Hz (field rate minus
+   the rotor's rate about the stator axis u) of each stator while it carries current (when the result has
+   ``field_rate``).
+
+Command changes are also dashed vertical lines across the panels.
 
 Long runs are thinned to at most ``MAX_POINTS`` points per line by keeping each
 bucket's minimum and maximum, so peaks and envelopes survive the thinning.
