@@ -287,7 +287,7 @@ def _panel_theta(ax, ts, theta_deg, attitude):
 
 def _panel_L(ax, ts, L):
     for j in range(3):
-        ax.plot(*decimate_minmax(ts, L[:, j]), color=f"C{j}", label=f"L along z{j + 1}")
+        ax.plot(*decimate_minmax(ts, L[:, j]), **_stator_style(j), label=f"L along z{j + 1}")  # zeros stay apart
     ax.set_ylabel("kinetic moment L\ncase frame (N·m·s)")
     _legend(ax)
 
