@@ -1376,19 +1376,27 @@ def markdown(res: Results) -> str:
     return "\n".join(L) + "\n"
 
 
-def plot_work_precision(res: Results, path: Path) -> None:
-    """Log-log run time against error, one panel per scene/horizon, one line per method (Agg).
+def plot_work_precision(res: Results, path=None):
+    """Log-log CPU time of a run (s) against its error (final (L, q) vs the reference, dimensionless), one panel
+    per scene/horizon, one line of markers per method; a dashed vertical line at the target error
+    ``TARGET_ERROR`` where the headline compares the costs. Wall times are not drawn (they are in bench.csv).
 
-    Solid lines: CPU time of the run (the costs the headline compares); dotted: its wall time."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    Args:
+        res: the benchmark's results (``res.rows``: :class:`Row`).
+        path: if given, the figure is also written there as PNG (atomically; parent folders are made).
+
+    Returns:
+        The ``matplotlib.figure.Figure`` (Agg canvas, no pyplot state).
+    """
+    from matplotlib.lines import Line2D
+
+    from .plotting import new_figure, save_png
 
     groups: dict = {}
     for r in res.rows:
         groups.setdefault((r.scene, r.horizon), []).append(r)
     n = max(len(groups), 1)
-    fig = Figure(figsize=(6.0 * n, 4.6), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure((6.0 * n, 4.6))
     axes = fig.subplots(1, n, squeeze=False)[0]
     markers = ["o", "s", "^", "D", "v", "P", "X", "*", "h"]
     for ax, ((scene, T), rows) in zip(axes, groups.items()):
@@ -1396,21 +1404,25 @@ def plot_work_precision(res: Results, path: Path) -> None:
         for r in rows:
             methods.setdefault(r.method, []).append(r)
         for i, (m, rs) in enumerate(methods.items()):
-            pts = [(r.error, r.cpu, r.wall) for r in rs if r.error > 0 and math.isfinite(r.error)]
+            pts = [(r.error, r.cpu) for r in rs if r.error > 0 and math.isfinite(r.error)]
             if pts:
-                e = [p[0] for p in pts]
-                line, = ax.loglog(e, [p[1] for p in pts], marker=markers[i % len(markers)], label=m)
-                ax.loglog(e, [p[2] for p in pts], ls=":", lw=1, color=line.get_color(), alpha=0.6)
+                ax.loglog([p[0] for p in pts], [p[1] for p in pts], marker=markers[i % len(markers)], label=m)
         ax.axvline(TARGET_ERROR, color="0.6", ls="--", lw=1)
+        ax.text(TARGET_ERROR, 0.98, f" target {TARGET_ERROR:.0e}", transform=ax.get_xaxis_transform(), rotation=90,
+                va="top", ha="right", fontsize=7, color="0.4")
         ax.set_xlabel("error of the final (L, q) vs reference")
-        ax.set_ylabel("run time, s (CPU; dotted: wall)")
+        ax.set_ylabel("CPU time of the run (s)")
         ax.set_title(f"{scene}, {T:g} s simulated", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+        target = Line2D([], [], color="0.6", ls="--", lw=1,
+                        label=f"target error {TARGET_ERROR:.0e} (costs compared here)")
+        ax.legend(handles=ax.get_legend_handles_labels()[0] + [target], fontsize=8)
     if not groups:
         axes[0].text(0.5, 0.5, "no runs", ha="center")
     fig.suptitle(f"gyro_sim work-precision ({res.config.mode}, {res.started})", fontsize=10)
-    fig.savefig(path, dpi=110)
+    if path is not None:
+        save_png(fig, path, dpi=110)
+    return fig
 
 
 # ----------------------------------------------------------------------------------------

@@ -472,6 +472,16 @@ def _run_ros(args, scene, name) -> int:
 PLOT_SAMPLES = 20_000
 
 
+def _bag_scene(b):
+    """The bag's embedded scene (a Scene: stator axes for the plot's slip), or None if it has none or it is unreadable."""
+    from gyro_sim.scene import parse_scene_text, scene_from_dict
+
+    try:
+        return scene_from_dict(parse_scene_text(b.scene_text, "(embedded scene)"), where="(embedded scene)")
+    except Exception:  # noqa: BLE001 - an old or damaged bag: the plot goes without slip
+        return None
+
+
 def _bag_result(bag: Path):
     """A RunResult-like view of a recorded bag (for the summary and the plot)."""
     from types import SimpleNamespace
@@ -490,8 +500,13 @@ def _bag_result(bag: Path):
     except Exception:
         pass
     energy = 0.5 * np.sum(b.omega_b**2 * J, axis=1) if J is not None else np.full(len(b.t), np.nan)
+    from gyro_sim.plotting import commands_from_arrays
+
     res = SimpleNamespace(t=b.t, L=b.L, q=b.q, omega_b=b.omega_b, euler=b.euler, current=b.current,
-                          stator_names=b.stator_names, scene=SimpleNamespace(name=b.scene_name or bag.name))
+                          field_rate=b.rate, stator_names=b.stator_names,
+                          commands=commands_from_arrays(b.command_t, b.stator_names, b.command_current,
+                                                        b.command_rate),
+                          scene=_bag_scene(b) or SimpleNamespace(name=b.scene_name or bag.name))
     wall = info["custom"].get("gyro_sim.wall_time")
     steps = info["custom"].get("gyro_sim.steps")
     est = None

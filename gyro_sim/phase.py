@@ -1,6 +1,6 @@
-"""(θ, φ) phase portrait of a run over the averaged ψ-switching model of [K] §3 (PNG, Agg canvas).
+"""(θ, φ) phase portrait of a run over the averaged ψ-switching model of [K] §3 (a matplotlib Figure, Agg canvas).
 
-``plot_phase(result_or_bag_data, path, scene=None)`` draws
+``plot_phase(result_or_bag_data, path=None, scene=None) -> Figure`` (saved as PNG when given a path) draws
 
 * left: the run's trajectory in the (φ, θ) plane (θ = ``euler[:, 1]``, φ = ``euler[:, 2]``, in degrees;
   φ wrapped to [0°, 180°): (3.4) depends on φ only through sin 2φ, cos 2φ), coloured by time, over the
@@ -21,25 +21,24 @@ torque model the curves are drawn but marked as indicative only.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Optional
 
 import numpy as np
 
-from .plotting import save_png
+from .plotting import new_figure, save_png
 
 __all__ = ["plot_phase", "portrait_model", "MAX_POINTS"]
 
 MAX_POINTS = 20000  # trajectory points drawn (uniform stride beyond this)
 
-_KIND_STYLE = {  # marker, face colour, edge colour, label
-    "stable focus": ("o", "tab:green", "darkgreen", "stable focus"),
-    "unstable focus": ("o", "none", "tab:red", "unstable focus"),
-    "stable node": ("s", "tab:green", "darkgreen", "stable node"),
-    "unstable node": ("s", "none", "tab:red", "unstable node"),
-    "saddle": ("X", "tab:orange", "saddlebrown", "saddle"),
-    "center": ("o", "none", "tab:blue", "center"),
-    "degenerate": ("o", "none", "gray", "degenerate"),
+_KIND_STYLE = {  # marker, face colour, edge colour, legend label (plain words; the type in parentheses)
+    "stable focus": ("o", "tab:green", "darkgreen", "stable equilibrium (focus): the motion spirals in"),
+    "unstable focus": ("o", "none", "tab:red", "unstable equilibrium (focus): spirals out"),
+    "stable node": ("s", "tab:green", "darkgreen", "stable equilibrium (node)"),
+    "unstable node": ("s", "none", "tab:red", "unstable equilibrium (node)"),
+    "saddle": ("X", "tab:orange", "saddlebrown", "unstable equilibrium (saddle)"),
+    "center": ("o", "none", "tab:blue", "neutral equilibrium (centre)"),
+    "degenerate": ("o", "none", "gray", "equilibrium (degenerate)"),
 }
 
 
@@ -98,10 +97,6 @@ def portrait_model(scene):
     return m, note
 
 
-def _num(x) -> str:
-    return f"{x:+.4g}" if math.isfinite(x) else ("+∞" if x > 0 else "−∞")
-
-
 def _wrap_phi(phi_rad, convention: str):
     off = 0.5 * math.pi if convention == "K" else 0.0
     return np.degrees(np.mod(np.asarray(phi_rad, dtype=float) + off, math.pi))
@@ -122,28 +117,30 @@ def _colored_line(ax, x, y, t, cmap, norm, jump: Optional[float] = None, lw=1.2)
     return lc
 
 
-def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim") -> Path:
-    """Write the (θ, φ) phase portrait of a run as a PNG over the analytic curves of [K] §3.
+def plot_phase(result_or_bag_data, path=None, scene=None, phi_convention: str = "sim"):
+    """The (θ, φ) phase portrait of a run over the analytic curves of [K] §3, as a matplotlib Figure.
+
+    Left: nutation θ (deg, polar axis x3 vs L) against the rotation angle φ about the polar axis (deg, mod
+    180°); right: θ against |L| / L₀ (L₀ = J Λ0, N·m·s). The legend names every curve and marker in plain
+    words ([K]'s equation numbers in the module docstring); the title gives the scene and the model's
+    parameters (rotor shape, whether equilibria and limit cycles exist and why).
 
     Args:
         result_or_bag_data: a ``RunResult`` or ``BagData`` (or anything with ``t`` s, ``euler`` (n,3)
             ψ, θ, φ rad and ``L`` (n,3) N·m·s).
-        path: the PNG to write (parent folders are made).
+        path: if given, the figure is also written there as PNG (atomically; parent folders are made).
         scene: the run's :class:`~gyro_sim.scene.Scene`; default ``result.scene`` or the bag's embedded scene.
         phi_convention: ``"sim"`` (the simulator's φ, default) or ``"K"`` ([K]'s φ_K = φ + π/2).
 
     Returns:
-        The path written, as a ``Path``.
+        The ``matplotlib.figure.Figure`` (Agg canvas, no pyplot state: restyle it, save it again).
     """
     from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import Normalize
-    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
     if phi_convention not in ("sim", "K"):
         raise ValueError(f"phi_convention = {phi_convention!r}: 'sim' or 'K'")
-    path = Path(path)
     data = result_or_bag_data
     t = np.asarray(data.t, dtype=float).ravel()
     n = t.size
@@ -161,8 +158,7 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
         or getattr(data, "scene_name", None) or "gyro_sim run"
     model, note = portrait_model(sc)
 
-    fig = Figure(figsize=(13.0, 6.2), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure((13.0, 7.0))
     ax, axL = fig.subplots(1, 2, sharey=True, width_ratios=[1.6, 1.0])
     cmap = colormaps["viridis"]
     norm = Normalize(vmin=float(t[0]) if n else 0.0, vmax=float(t[-1]) if n and t[-1] > t[0] else 1.0)
@@ -180,11 +176,11 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
         ylo, yhi = 0.0, 180.0
 
     legend = []
-    Lscale, xlab = 1.0, "|L| (N·m·s)"
+    Lscale, xlab = 1.0, "kinetic moment |L| (N·m·s)"
     if model is not None:
         J = model.rotor.J
         Lscale = J * model.Lam0
-        xlab = "|L| / (J Λ0)  = k/ω of [K]   (Λ0 = %.4g rad/s)" % model.Lam0
+        xlab = (f"kinetic moment |L| / L₀\n(L₀ = J·Λ0 = {Lscale:.4g} N·m·s, the steady |L| at θ = 0; [K]'s k/ω)")
         # streamlines of (3.4) on the ellipsoid (3.5)
         gx = np.linspace(0.0, 180.0, 61)
         gy = np.linspace(max(ylo, 0.3), min(yhi, 179.7), 61)
@@ -200,11 +196,12 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
         with np.errstate(invalid="ignore", divide="ignore"):
             U, Vv = np.where(sp > 0, U / sp, 0.0), np.where(sp > 0, Vv / sp, 0.0)  # directions only
         ax.streamplot(gx, gy, U, Vv, density=1.1, color="0.78", linewidth=0.6, arrowsize=0.7, zorder=1)
-        legend.append(Line2D([], [], color="0.7", lw=0.8, label="(3.4) on the ellipsoid (3.5)"))
+        legend.append(Line2D([], [], color="0.7", lw=0.8, marker=">", markersize=4,
+                             label="averaged motion at steady |L| (arrows: its direction)"))
         # ellipsoid (3.5) in the right panel
         tt = np.linspace(0.0, math.pi, 361)
         axL.plot(model.ellipsoid_L(tt) / Lscale, np.degrees(tt), color="0.35", lw=1.2, zorder=2,
-                 label="ellipsoid (3.5)")
+                 label="steady |L| for each θ (spin drive = braking)")
         # equilibria (3.6)–(3.7)
         eqs = model.equilibria()
         seen = set()
@@ -219,33 +216,26 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
                     markeredgecolor=ec, markeredgewidth=2, zorder=5)
         if eqs:  # all equilibria share (k*, 90°) = (ω/(1+κ), 90°) in the right panel
             axL.plot([eqs[0].L / Lscale], [90.0], linestyle="none", marker="P", markersize=12, color="k",
-                     markeredgecolor="w", zorder=5, label="equilibria (3.6): k* = ω/(1+κ)")
+                     markeredgecolor="w", zorder=5, label="the equilibria (at θ = 90°)")
         for e in eqs:
             mk, fc, ec, lab = _KIND_STYLE.get(e.kind, ("o", "none", "k", e.kind))
-            if f"{lab} (3.6)" not in [h.get_label() for h in legend]:
+            if lab not in [h.get_label() for h in legend]:
                 legend.append(Line2D([], [], linestyle="none", marker=mk, markersize=9, markerfacecolor=fc,
-                                     markeredgecolor=ec, markeredgewidth=2, label=f"{lab} (3.6)"))
+                                     markeredgecolor=ec, markeredgewidth=2, label=lab))
         # limit cycles (3.9)–(3.10)
         for c in model.limit_cycles():
             ls = "-" if c.stable else "--"
             col = "tab:purple" if c.name == "r+" else "tab:brown"
-            lab = f"{'r⁺' if c.name == 'r+' else 'r₋'} (3.9), {'stable' if c.stable else 'unstable'}: " \
-                  f"θ = {math.degrees(c.theta):.1f}°"
+            lab = f"{'stable' if c.stable else 'unstable'} limit cycle {'r⁺' if c.name == 'r+' else 'r₋'}: " \
+                  f"θ stays at {math.degrees(c.theta):.1f}° while φ turns"
             ax.axhline(math.degrees(c.theta), color=col, ls=ls, lw=1.8, zorder=4)
             axL.plot([c.L / Lscale], [math.degrees(c.theta)], marker="D", color=col, markersize=8,
                      markerfacecolor=col if c.stable else "none", linestyle="none", zorder=5,
-                     label=f"{'r⁺' if c.name == 'r+' else 'r₋'} (3.9): k, θ")
+                     label=f"limit cycle {'r⁺' if c.name == 'r+' else 'r₋'} ({'stable' if c.stable else 'unstable'})")
             legend.append(Line2D([], [], color=col, ls=ls, lw=1.6, label=lab))
-        s, p = model.s, model.p
-        eq_txt = (f"|s| = {abs(s):.3g} ≤ 1: equilibria at θ = 90°" if eqs else
-                  (f"|s| = {abs(s):.3g} > 1: no equilibria" if math.isfinite(s) else "δ = 0: no equilibria"))
-        cy_txt = (f"p² = {p * p:.3g} ≤ p*² = {model.p_star_sq:.3g}: cycles r⁺, r₋" if model.cycles_exist() and
-                  math.isfinite(p) else (f"p² = {p * p:.3g} > p*² = {model.p_star_sq:.3g}: no cycles"
-                                         if math.isfinite(p) else "κ = 0: no cycles"))
-        title = (f"{name} — averaged ψ-switching model [K] (3.4): κ = {model.kappa:+.4g}, δ = {model.rotor.delta:+.3g}, "
-                 f"s = {_num(s)}, p = {_num(p)}\n{eq_txt};  {cy_txt}" + (f"\n({note})" if note else ""))
+        title = _title(name, getattr(sc, "description", None), model, bool(eqs), note)
     else:
-        title = f"{name} — trajectory only: {note}"
+        title = _title(name, getattr(sc, "description", None), None, False, note)
 
     # --- the run
     if n:
@@ -257,20 +247,20 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
             a.plot([xs[-1]], [th[-1]], marker="*", color=cmap(1.0), markeredgecolor="k", markersize=13,
                    linestyle="none", zorder=6)
         legend.append(Line2D([], [], marker="s", color=cmap(0.0), markeredgecolor="k", linestyle="none",
-                             label="run: start"))
+                             label=f"run start (t = {t[0]:.3g} s)"))
         legend.append(Line2D([], [], marker="*", color=cmap(1.0), markeredgecolor="k", markersize=11,
-                             linestyle="none", label="run: end"))
+                             linestyle="none", label=f"run end (t = {t[-1]:.3g} s)"))
         cb = fig.colorbar(lc, ax=[ax, axL], shrink=0.9, pad=0.01)
-        cb.set_label("t (s)")
+        cb.set_label("time t (s): colour of the run's trajectory")
     else:
         ax.text(0.5, 0.5, "no samples", ha="center", va="center", transform=ax.transAxes)
 
-    conv = "φ_K = φ + 90° of [K]" if phi_convention == "K" else "φ of the simulator (φ_K = φ + 90°)"
+    conv = "drawn as [K]'s φ_K = φ + 90°" if phi_convention == "K" else "the simulator's φ ([K]'s φ_K = φ + 90°)"
     ax.set_xlim(0.0, 180.0)
     ax.set_xticks(np.arange(0, 181, 30))
     ax.set_ylim(ylo, yhi)
-    ax.set_xlabel(f"{conv}, mod 180° (deg)")
-    ax.set_ylabel("nutation θ (deg)")
+    ax.set_xlabel(f"rotation angle φ of the rotor about its polar axis x3, mod 180° (deg)\n{conv}")
+    ax.set_ylabel("nutation θ (deg): angle between the polar axis x3 and L")
     axL.set_xlabel(xlab)
     xs = Lmag[np.isfinite(Lmag)] / Lscale
     if model is not None:  # the ellipsoid over the θ window, the equilibria and cycles inside it
@@ -286,10 +276,51 @@ def plot_phase(result_or_bag_data, path, scene=None, phi_convention: str = "sim"
         axL.set_xlim(lo - pad, hi + pad)
     for a in (ax, axL):
         a.grid(True, alpha=0.3)
-    if legend:
-        ax.legend(handles=legend, loc="upper left", fontsize=8, framealpha=0.85)
-    if model is not None:
-        axL.legend(loc="lower left", fontsize=8, framealpha=0.85)
+    handles = legend + [h for h in axL.get_legend_handles_labels()[0]]
+    if handles:  # one legend under both panels: it hides no trajectory
+        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=10)
 
-    return save_png(fig, path)
+    if path is not None:
+        save_png(fig, path)
+    return fig
+
+
+def _shape_words(model) -> str:
+    """The rotor's inertia in words: prolate/oblate (κ), transverse asymmetry (δ)."""
+    k, d = model.kappa, model.rotor.delta
+    shape = "oblate" if k > 0 else ("prolate" if k < 0 else "spherical inertia")
+    asym = "axisymmetric (J1 = J2)" if d == 0 else f"transverse asymmetry (J2 − J1)/(J2 + J1) = {d:+.3g} (δ)"
+    return f"rotor {shape}: polar / transverse inertia J3/J = {1 + k:.3g} (κ = {k:+.3g}), {asym}"
+
+
+def _equilibria_words(model, has_eq: bool) -> str:
+    """Why the equilibria at θ = 90° exist or not: s = switching torque / asymmetry torque at θ = 90°."""
+    s = model.s
+    if not math.isfinite(s):
+        return "no equilibria: an axisymmetric rotor (δ = 0) has no preferred φ"
+    if has_eq:
+        return f"equilibria at θ = 90°: switching torque < asymmetry torque (|s| = {abs(s):.3g} ≤ 1)"
+    return f"no equilibria: switching torque > asymmetry torque (|s| = {abs(s):.3g} > 1)"
+
+
+def _cycles_words(model) -> str:
+    """Why the limit cycles exist or not: p = switching torque / the polar-inertia (κ) torque."""
+    p = model.p
+    if not math.isfinite(p):
+        return "no limit cycles: no polar-inertia torque (κ = 0)"
+    if model.cycles_exist():
+        return f"limit cycles: polar-inertia torque balances the switching (p² = {p * p:.3g} ≤ {model.p_star_sq:.3g})"
+    return f"no limit cycles: switching torque > polar-inertia torque (p² = {p * p:.3g} > {model.p_star_sq:.3g})"
+
+
+def _title(name, description, model, has_eq: bool, note: str) -> str:
+    """Scene, then (with a model) the rotor and what the averaged ψ-switching model predicts, in words."""
+    head = f"{name}: {description}" if description else name
+    if model is None:
+        return f"{head}\ntrajectory only: {note}"
+    lines = [head, "curves: averaged model of ψ-switching nutation control ([K] §3); " + _shape_words(model),
+             _equilibria_words(model, has_eq) + ".  " + _cycles_words(model)]
+    if note:
+        lines.append(f"({note})")
+    return "\n".join(lines)

@@ -1115,24 +1115,31 @@ def _xval(v):
     return float(v) if _is_number(v) else math.nan
 
 
-def plot_sweep(rows: list, meta: dict, png: str | Path, metrics: Optional[Sequence[str]] = None) -> Path:
-    """One PNG, a panel per metric: a metric against the one grid key (runs as points, the mean over
+def plot_sweep(rows: list, meta: dict, path: str | Path | None = None, metrics: Optional[Sequence[str]] = None):
+    """One figure, a panel per metric: a metric against the one grid key (runs as points, the median over
     Monte Carlo samples as a line), a 2-D map over the first two grid keys (mean over the rest), or
     histograms for a random-only sweep. Runs that never reached a level (inf) are ▲ at the top; failed
-    or invalid variants are red × (1-D) or hatched cells (2-D)."""
+    or invalid variants are red × (1-D or 2-D cells).
+
+    Args:
+        rows: the result rows (:func:`read_results`); meta: the sweep's metadata (grid, random, metrics).
+        path: if given, the figure is also written there as PNG (atomically; parent folders are made).
+        metrics: the metric names to draw (default: every metric of ``meta``, at most 8).
+
+    Returns:
+        The ``matplotlib.figure.Figure`` (Agg canvas, no pyplot state; the backend is left as it is)."""
     import matplotlib
+    import matplotlib.transforms
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    png = Path(png)
+    from .plotting import new_figure, save_png
     names = list(metrics or list(meta.get("metrics", {})))[:8]
     grid = list(meta.get("grid", []))
     rnd = list(meta.get("random", {}))
     n = max(1, len(names))
     ncol = 1 if n == 1 else 2
     nrow = math.ceil(n / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(6.4 * ncol, 4.0 * nrow), squeeze=False)
+    fig = new_figure((6.4 * ncol, 4.0 * nrow), layout="tight")
+    axes = fig.subplots(nrow, ncol, squeeze=False)
     title = f"sweep {meta.get('name', '')}: {len(rows)} runs"
     nf = sum(1 for r in rows if r["status"] != "ok")
     if nf:
@@ -1197,7 +1204,7 @@ def plot_sweep(rows: list, meta: dict, png: str | Path, metrics: Optional[Sequen
                     INF[a, b] += 1
             with np.errstate(invalid="ignore", divide="ignore"):
                 Z = np.where(C > 0, S / np.maximum(C, 1), math.nan)
-            cmap = matplotlib.colormaps["viridis"]
+            cmap = matplotlib.colormaps["viridis"]  # the registry: no pyplot
             cmap = cmap.with_extremes(bad="0.85") if hasattr(cmap, "with_extremes") else cmap
             im = ax.imshow(np.ma.masked_invalid(Z), origin="lower", aspect="auto", cmap=cmap, interpolation="nearest")
             fig.colorbar(im, ax=ax, label=name)
@@ -1214,11 +1221,9 @@ def plot_sweep(rows: list, meta: dict, png: str | Path, metrics: Optional[Sequen
             ax.set_ylabel(ky)
     for j in range(len(names), nrow * ncol):
         axes[j // ncol][j % ncol].set_visible(False)
-    fig.tight_layout()
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    if path is not None:
+        save_png(fig, path, dpi=110)
+    return fig
 
 
 # ------------------------------------------------------------------------------------------
@@ -1499,7 +1504,8 @@ def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
             if not args.quiet:
                 _print_table(rows, meta, sys.stdout)
             if not args.no_plot and rows:
-                png = plot_sweep(rows, meta, Path(args.source).with_suffix(".png"))
+                png = Path(args.source).with_suffix(".png")
+                plot_sweep(rows, meta, png)
                 _write(sys.stdout, f"plot: {png}\n")
             return EXIT_OK
         spec = load_sweep(args.source)
@@ -1542,7 +1548,8 @@ def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
            + (f" in {res.tasks} tasks" if res.workers and res.mode != "in-process" and res.tasks else "") + "\n")
     _write(sys.stdout, f"results: {res.out}\n")
     if not args.no_plot and res.rows:
-        png = plot_sweep(res.rows, meta, res.out.with_suffix(".png"))
+        png = res.out.with_suffix(".png")
+        plot_sweep(res.rows, meta, png)
         _write(sys.stdout, f"plot: {png}\n")
     if res.interrupted:
         _write(sys.stderr, f"interrupted: {len(res.rows)} of {res.n_total} done; run the same command again to resume\n")

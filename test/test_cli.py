@@ -280,8 +280,11 @@ def test_module_help_runs_in_a_fresh_interpreter():
 
 def test_plot_run_writes_a_png(tmp_path):
     result = fake_result(SCENES["spinup_thin_shell"])
-    path = plotting.plot_run(result, tmp_path / "a" / "b.png")
-    assert path == tmp_path / "a" / "b.png"
+    from matplotlib.figure import Figure
+
+    path = tmp_path / "a" / "b.png"
+    fig = plotting.plot_run(result, path)
+    assert isinstance(fig, Figure)
     data = path.read_bytes()
     assert data[:8] == PNG_MAGIC
     assert len(data) > 10_000, f"PNG only {len(data)} bytes"
@@ -290,8 +293,10 @@ def test_plot_run_writes_a_png(tmp_path):
 
 def test_plot_run_handles_a_long_run_and_no_stators(tmp_path):
     result = fake_result(SCENES["steer_solid"], n=300_001, stators=())
-    path = plotting.plot_run(result, tmp_path / "long.png")
-    assert path.read_bytes()[:8] == PNG_MAGIC
+    fig = plotting.plot_run(result, tmp_path / "long.png")
+    assert (tmp_path / "long.png").read_bytes()[:8] == PNG_MAGIC
+    # thinned: no line of the figure keeps more than MAX_POINTS of the 300,001 samples
+    assert max(len(line.get_xdata()) for ax in fig.axes for line in ax.get_lines()) <= plotting.MAX_POINTS
 
 
 def test_decimation_keeps_at_most_5000_points_and_the_extremes():

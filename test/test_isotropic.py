@@ -109,7 +109,8 @@ def test_outputs_without_attitude(tmp_path):
     s = r.summary()
     assert s["attitude"] is False and math.isnan(s["theta_deg"]) and s["spin_rate"] > 0.0
     assert math.isclose(s["energy"], 0.5 * np.dot(r.L[-1], r.L[-1]) / J, rel_tol=1e-12)
-    png = plot_run(r, tmp_path / "iso.png")
+    png = tmp_path / "iso.png"
+    plot_run(r, png)
     assert png.stat().st_size > 1000
     with pytest.raises(ValueError, match="did not integrate the attitude"):
         record_result(r, tmp_path / "bag")

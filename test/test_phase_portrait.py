@@ -367,10 +367,11 @@ def test_plot_phase_writes_png_for_runs_bags_and_scenes_it_cannot_describe(tmp_p
     m, note = portrait_model(scene)
     assert m is not None and note == "" and abs(m.s) < 1 and any(e.kind == "stable focus" for e in m.equilibria())
     r = gyro_sim.run(scene, duration=2.0)
-    png = plot_phase(r, tmp_path / "run.png")
-    pngK = plot_phase(r, tmp_path / "runK.png", scene, phi_convention="K")
+    png, pngK, pngB = tmp_path / "run.png", tmp_path / "runK.png", tmp_path / "bag.png"
+    plot_phase(r, png)
+    plot_phase(r, pngK, scene, phi_convention="K")
     record_result(r, tmp_path / "bag")
-    pngB = plot_phase(read_bag(tmp_path / "bag"), tmp_path / "bag.png")
+    plot_phase(read_bag(tmp_path / "bag"), pngB)
     for p in (png, pngK, pngB):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 20_000
     print(f"\n  {png} ({png.stat().st_size} B), {pngK.name}, {pngB.name}: s = {m.s:+.3f}, p = {m.p:+.2f}, "
@@ -387,6 +388,7 @@ def test_plot_phase_writes_png_for_runs_bags_and_scenes_it_cannot_describe(tmp_p
         mm, reason = portrait_model(sc)
         assert mm is None and why in reason
         res = gyro_sim.run(sc, duration=0.05)
-        p = plot_phase(res, tmp_path / f"{sc.name}_{why.replace(' ', '_')}.png", sc)
-        assert p.stat().st_size > 10_000
+        p = tmp_path / f"{sc.name}_{why.replace(' ', '_')}.png"
+        fig = plot_phase(res, p, sc)
+        assert p.stat().st_size > 10_000 and why in fig.get_suptitle()
         print(f"  {sc.name}: trajectory only — {reason}")

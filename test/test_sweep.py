@@ -242,8 +242,9 @@ def test_plots(tmp_path):
     mc = sw.run_sweep(tiny(vary={}, random={"initial.theta": "uniform(0.1,0.3)"}, samples=12), workers=0,
                       progress=False)
     for name, r in (("one", one), ("two", two), ("mc", mc)):
-        png = sw.plot_sweep(r.rows, r.spec.meta(), tmp_path / f"{name}.png")
-        assert png.stat().st_size > 20_000
+        png = tmp_path / f"{name}.png"
+        fig = sw.plot_sweep(r.rows, r.spec.meta(), png)
+        assert fig.axes and png.stat().st_size > 20_000 and not png.with_name(png.name + ".tmp").exists()
         with open(png, "rb") as f:
             assert f.read(8) == b"\x89PNG\r\n\x1a\n"
 
