@@ -868,6 +868,9 @@ def main(argv=None) -> int:
             status = _main(argv)
         except MissingExtra as exc:
             status = _error(str(exc))
+        except SystemExit:  # argparse's --help, --version or usage error: its output is flushed here too
+            sys.stdout.flush()
+            raise
         sys.stdout.flush()  # (inside the try: a pipe closed early fails here, with the buffered output)
     except BrokenPipeError:
         _drop_stdout()

@@ -1495,12 +1495,11 @@ def _require_extras(parquet: bool, in_process: bool, what: str = "gyro-sim sweep
     use is not installed: pyarrow where results are read or written (``parquet``), Dask unless it runs
     ``in_process`` (``--workers 0``). Checked before any variant runs (a missing pyarrow would otherwise end
     the sweep after its last run); tqdm is optional (no progress bar without it)."""
-    from .extras import require
+    from .extras import missing, require
 
-    if parquet:
-        require("sweep", what, ("pyarrow",))
-    if not in_process:
-        require("sweep", what, ("dask", "distributed"), hint="; or --workers 0 to run in this process")
+    modules = ("pyarrow",) * parquet + ("dask", "distributed") * (not in_process)
+    dask_gone = not in_process and {"dask", "distributed"} & set(missing("sweep", modules))
+    require("sweep", what, modules, hint="; or --workers 0 to run in this process" if dask_gone else "")
 
 
 def _check_command_extras(args) -> None:
