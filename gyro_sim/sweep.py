@@ -1019,7 +1019,12 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
     per task, or ``"auto"``: each task sized as it is sent (:mod:`gyro_sim.sweep_tasks`); the results do not
     depend on it."""
     t_start = time.perf_counter()
-    _require_extras(out is not None, workers == 0 and not scheduler, "run_sweep")
+    from .extras import MissingExtra
+
+    try:  # (before any run: without pyarrow the results could not be written after the last one)
+        _require_extras(out is not None, workers == 0 and not scheduler, "run_sweep")
+    except MissingExtra as e:
+        raise SweepError(str(e)) from None
     variants = spec.variants()
     by_id = {v.run_id: v for v in variants}
     out = Path(out) if out is not None else None

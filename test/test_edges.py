@@ -77,7 +77,7 @@ def test_run_sweep_checks_pyarrow_before_any_run(monkeypatch, tmp_path):
     """The API too: without pyarrow, run_sweep(out=...) used to run every variant, then fail writing Parquet."""
     hide(monkeypatch, "pyarrow")
     spec = SimpleNamespace(variants=lambda: pytest.fail("variants made before the check"))
-    with pytest.raises(extras.MissingExtra, match="pyarrow"):
+    with pytest.raises(sweep_mod.SweepError, match=r"^run_sweep needs the 'sweep' extra: .*\(missing: pyarrow\)$"):
         sweep_mod.run_sweep(spec, out=tmp_path / "s.parquet", workers=0)
     assert list(tmp_path.iterdir()) == []
 
