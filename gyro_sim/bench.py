@@ -514,7 +514,8 @@ class BenchConfig:
 
 
 def quick_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
-    """Under a minute: 0.2 s horizons (100 turns of the default scene's field), every tolerance."""
+    """0.2 s horizons (100 turns of the default scene's field), every tolerance (141 s wall with --no-ros
+    --no-accuracy on 2026-11-25, docs/benchmark.md)."""
     return BenchConfig(mode="quick", scenes=tuple(scenes), default_horizon=0.2,
                        horizon={"spinup_thin_shell": 0.2, "spinup_solid_sphere": 0.2},
                        spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True, startup=True, sweep=True)
@@ -1436,7 +1437,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "scipy solve_ivp (DOP853, LSODA) and a compiled fixed-step RK4 on the same scenes; writes "
                     "DIR/bench.md, bench.csv, "
                     "work_precision.png and prints the headline ratios.")
-    p.add_argument("--quick", action="store_true", help="short horizons, under a minute")
+    p.add_argument("--quick", action="store_true",
+                   help="short horizons (still minutes: 141 s wall with --no-ros --no-accuracy, docs/benchmark.md)")
     p.add_argument("--out", metavar="DIR", type=Path, default=Path("runs/bench"),
                    help="output folder (default: runs/bench)")
     p.add_argument("--scenes", metavar="SCENE", nargs="+", default=list(DEFAULT_SCENES),

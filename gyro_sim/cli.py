@@ -13,6 +13,7 @@
     gyro-sim flywheel-plan ...      wheel axis, turn and speed profile for a wanted attitude ([S]);
                                     --write-scene FILE writes a ready-to-run scene
     gyro-sim ros-index [PREFIX]     the ament index of an editable install, for `ros2 run gyro_sim ...`
+    gyro-sim api-docs [OUT_DIR]     the API reference (HTML, pdoc) of gyro_sim and gyro_ctl
 
 Scene errors (``gyro_sim.scene.SceneError``) are reported as ``error: <message>``
 on stderr with exit status 2, without a traceback.
@@ -20,7 +21,12 @@ on stderr with exit status 2, without a traceback.
 Exit status: 0 a complete run; 1 a run that failed (its bag could not be written whole: it is closed with what
 fit); 2 bad usage, a bad scene or an unusable output path (checked before the run); 128 + the signal for a run
 ended by a signal (130 Ctrl-C / SIGINT, 143 SIGTERM, 129 SIGHUP): a recorded run's bag is then closed with
-everything up to the signal and summarised.
+everything up to the signal and summarised; 141 (128 + SIGPIPE, what ``cat`` or ``yes`` give) when the reader of
+its output went away early (``gyro-sim scenes | head -1``): no traceback, the rest of the output is dropped.
+
+A command that needs an optional dependency (a pip extra of setup.py: ``ros``, ``sweep``, ``live``, ``data``,
+``docs``) checks for it before doing anything and, where it is missing, says so in one ``error:`` line naming the
+extra to install, status 2 (:mod:`gyro_sim.extras`).
 """
 from __future__ import annotations
 
@@ -36,6 +42,7 @@ __all__ = ["main", "build_parser", "format_summary"]
 EXIT_OK = 0
 EXIT_FAILURE = 1  # a run that failed (e.g. its bag could not be written whole)
 EXIT_USAGE = 2  # argparse's status for bad usage; scene errors use it too
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout closed it early (as a shell reports `yes | head -1`)
 
 
 def _positive_seconds(text: str) -> float:
@@ -205,6 +212,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scenes.set_defaults(func=_cmd_scenes)
 
+    api = sub.add_parser(
+        "api-docs",
+        help="write the API reference of gyro_sim and gyro_ctl (HTML, from the docstrings; needs the docs extra)",
+        description="Generate the API reference (pdoc) of the public modules of gyro_sim and gyro_ctl from their "
+                    "docstrings into OUT_DIR (open OUT_DIR/index.html). Modules whose import needs an optional "
+                    "dependency that is not installed (gyro_sim.ros without rclpy) are left out, with a note. "
+                    "Needs the 'docs' extra (pdoc); docs/api.md.",
+    )
+    api.add_argument("out", metavar="OUT_DIR", type=Path, nargs="?", default=Path("runs/api"),
+                     help="folder for the HTML (default: runs/api)")
+    api.set_defaults(func=_cmd_api_docs)
+
     warm = sub.add_parser(
         "warmup",
         help="compile the numba kernels of scenes ahead of their first run",
@@ -283,16 +302,12 @@ def _ros_missing(what: str) -> bool:
     """True (after one ``error:`` line) if rclpy cannot be found: ``what`` needs the ROS 2 Python packages.
 
     Checked in this process before anything starts: the node processes would each end in a traceback."""
-    import importlib.util
+    from gyro_sim.extras import missing_message
 
-    try:
-        found = importlib.util.find_spec("rclpy") is not None
-    except (ImportError, ValueError):  # a parent package missing, or a module without a spec
-        found = False
-    if not found:
-        _error(f"{what} needs the ROS 2 Python packages (rclpy): pip install 'gyro_sim[ros]' "
-               "(or source a ROS 2 install)")
-    return not found
+    message = missing_message("ros", what)
+    if message is not None:
+        _error(message)
+    return message is not None
 
 
 # --- commands ---------------------------------------------------------------
@@ -558,20 +573,71 @@ def _cmd_info(args) -> int:
         info = bag_info(args.bag)
     except Exception as exc:
         return _unreadable(args.bag, exc)
-    rows = [("bag", info["path"]), ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
-            ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
-            ("duration", f"{info['duration']:.6g} s (from {info['start']:.6g} to {info['end']:.6g} s)"),
-            ("messages", str(info["message_count"])), ("end", str(info["end_reason"]))]
-    shown = {"gyro_sim.scene_name", "gyro_sim.version", "gyro_sim.end", "gyro_sim.scene"}
-    for k, v in sorted(info["custom"].items()):
-        if k not in shown:
-            rows.append((k.removeprefix("gyro_sim."), str(v)))
+    rows = _info_rows(info)
     width = max(len(r[0]) for r in rows)
     _write(sys.stdout, "".join(f"{a:<{width}}  {b}\n" for a, b in rows))
     tw = max(len(t) for t in info["topics"]) if info["topics"] else 0
     for topic, ti in info["topics"].items():
         _write(sys.stdout, f"  {topic:<{tw}}  {ti['type']:<34} {ti['count']:>8}\n")
     return EXIT_OK
+
+
+def _seconds(value) -> str:
+    """A time in seconds to 3 significant digits (whole seconds from 1000 s up), with its unit."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f"{v:.0f} s" if abs(v) >= 1000 else f"{v:.3g} s"
+
+
+def _info_rows(info: dict) -> list:
+    """(label, value) rows of ``gyro-sim info`` from :func:`gyro_sim.recording.bag_info`: one duration (the
+    recorded span; the planned one beside it where the run ended early), times with units, the error estimate
+    as in the run summary, then any other custom_data key as it is."""
+    custom = {k.removeprefix("gyro_sim."): v for k, v in info["custom"].items()}
+    span = f"{info['duration']:.6g} s (t = {info['start']:.6g} to {info['end']:.6g} s"
+    planned = custom.get("planned_duration")
+    try:
+        early = planned is not None and abs(float(planned) - info["end"]) > 1e-9 * max(1.0, abs(float(planned)))
+    except (TypeError, ValueError):
+        early = False
+    span += f"; planned {_num(float(planned), '.6g')} s)" if early else ")"
+    rows = [("bag", str(info["path"])),
+            ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
+            ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
+            ("duration", span), ("messages", str(info["message_count"])), ("end", str(info["end_reason"]))]
+    if "mode" in custom:
+        rows.append(("mode", str(custom["mode"])))
+    if custom.get("wall_time"):
+        wall = _seconds(custom["wall_time"])
+        if custom.get("compile_time") and float(custom["compile_time"]) > 0:
+            wall += f" (+ {_seconds(custom['compile_time'])} compiling the kernels, first use)"
+        rows.append(("wall time", wall))
+    if "steps" in custom:
+        rows.append(("steps", str(custom["steps"])))
+    if "control_period" in custom:
+        rows.append(("control period", _seconds(custom["control_period"])))
+    if custom.get("error_estimate"):
+        rows.append(_error_row(custom["error_estimate"]))
+    shown = {"scene_name", "version", "end", "scene", "duration", "planned_duration", "mode", "wall_time",
+             "compile_time", "steps", "control_period", "error_estimate"}
+    rows += [(k.replace("_", " "), str(v)) for k, v in sorted(custom.items()) if k not in shown]
+    return rows
+
+
+def _error_row(text: str) -> tuple:
+    """The ``estimated error`` row (as in the run summary) of a bag's ``gyro_sim.error_estimate``, or its raw
+    text if it cannot be read."""
+    from gyro_sim.accuracy import ErrorEstimate
+    from gyro_sim.simulate import error_summary
+
+    try:
+        summary = error_summary(ErrorEstimate.from_json(str(text)))
+    except (ValueError, TypeError, KeyError):
+        return ("error estimate", str(text))
+    row = [r for r in format_summary("", summary).splitlines() if r.startswith("estimated error")]
+    return ("estimated error", row[0].removeprefix("estimated error").strip()) if row else ("error estimate", str(text))
 
 
 def _cmd_plot(args) -> int:
@@ -768,6 +834,26 @@ def _cmd_scenes(args) -> int:
     return status
 
 
+def _cmd_api_docs(args) -> int:
+    from gyro_sim.extras import require
+
+    require("docs", "gyro-sim api-docs")
+    if args.out.exists() and not args.out.is_dir():
+        return _error(f"{args.out}: is a file, not a folder for the API reference")
+    from gyro_sim.api_docs import build
+
+    try:
+        docs = build(args.out)
+    except OSError as exc:
+        return _error(f"cannot write the API reference to {args.out}: {exc.strerror or exc}")
+    for message in docs.warnings:
+        _write(sys.stderr, f"warning: pdoc: {message}\n")
+    for name, (extra, module) in sorted(docs.skipped.items()):
+        _write(sys.stdout, f"left out {name}: it needs {module} (pip install 'gyro_sim[{extra}]')\n")
+    _write(sys.stdout, f"API reference of {len(docs.modules)} modules: {docs.out / 'index.html'}\n")
+    return EXIT_OK
+
+
 def _cmd_warmup(args) -> int:
     import time
 
@@ -786,7 +872,42 @@ def _cmd_warmup(args) -> int:
 
 
 def main(argv=None) -> int:
-    """Entry point of ``gyro-sim``; returns the exit status."""
+    """Entry point of ``gyro-sim``; returns the exit status.
+
+    A missing optional dependency (:class:`gyro_sim.extras.MissingExtra`) ends the command with one ``error:`` line,
+    status 2; stdout closed by its reader (``gyro-sim scenes | head -1``) ends it quietly, status 141."""
+    from gyro_sim.extras import MissingExtra
+
+    try:
+        try:
+            status = _main(argv)
+        except MissingExtra as exc:
+            status = _error(str(exc))
+        except SystemExit:  # argparse's --help, --version or usage error: its output is flushed here too
+            sys.stdout.flush()
+            raise
+        sys.stdout.flush()  # (inside the try: a pipe closed early fails here, with the buffered output)
+    except BrokenPipeError:
+        _drop_stdout()
+        return EXIT_BROKEN_PIPE
+    return status
+
+
+def _drop_stdout() -> None:
+    """Point stdout at /dev/null: the interpreter's last flush at exit then has nowhere to fail (the recipe of
+    the Python docs, "Note on SIGPIPE")."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # (no file descriptor: a replaced sys.stdout)
+        pass
+
+
+def _main(argv) -> int:
+    """Parse ``argv`` and run its command (what :func:`main` does, without its handling of pipes and extras)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] in ("bench", "sweep"):  # these parse their own options (with their own --help)
         if argv[0] == "bench":

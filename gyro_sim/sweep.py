@@ -1019,6 +1019,12 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
     per task, or ``"auto"``: each task sized as it is sent (:mod:`gyro_sim.sweep_tasks`); the results do not
     depend on it."""
     t_start = time.perf_counter()
+    from .extras import MissingExtra
+
+    try:  # (before any run: without pyarrow the results could not be written after the last one)
+        _require_extras(out is not None, workers == 0 and not scheduler, "run_sweep")
+    except MissingExtra as e:
+        raise SweepError(str(e)) from None
     variants = spec.variants()
     by_id = {v.run_id: v for v in variants}
     out = Path(out) if out is not None else None
@@ -1494,10 +1500,39 @@ def _write(stream, text: str) -> None:
     write(stream, text)
 
 
+def _require_extras(parquet: bool, in_process: bool, what: str = "gyro-sim sweep") -> None:
+    """Raise :class:`gyro_sim.extras.MissingExtra` (one line naming the ``sweep`` extra) if what a sweep will
+    use is not installed: pyarrow where results are read or written (``parquet``), Dask unless it runs
+    ``in_process`` (``--workers 0``). Checked before any variant runs (a missing pyarrow would otherwise end
+    the sweep after its last run); tqdm is optional (no progress bar without it)."""
+    from .extras import missing, require
+
+    modules = ("pyarrow",) * parquet + ("dask", "distributed") * (not in_process)
+    dask_gone = not in_process and {"dask", "distributed"} & set(missing("sweep", modules))
+    require("sweep", what, modules, hint="; or --workers 0 to run in this process" if dask_gone else "")
+
+
+def _check_command_extras(args) -> None:
+    """What ``gyro-sim sweep`` with these arguments needs of the ``sweep`` extra (see :func:`_require_extras`)."""
+    if args.source.endswith(".parquet"):
+        _require_extras(True, True)
+    elif args.measure:
+        _require_extras(False, False, "gyro-sim sweep --measure")
+    elif not args.dry_run:
+        _require_extras(True, args.workers == 0 and not args.scheduler)
+
+
 def sweep_main(argv: Optional[Sequence[str]] = None) -> int:
     """``gyro-sim sweep``: returns the exit status (0 done, 1 every run failed, 2 bad sweep/usage, 130 interrupted)."""
+    from .extras import MissingExtra
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        _check_command_extras(args)
+    except MissingExtra as e:
+        _write(sys.stderr, f"error: {e}\n")
+        return EXIT_USAGE
     try:
         if args.source.endswith(".parquet"):
             rows, meta = read_results(args.source)

@@ -313,6 +313,7 @@ MODULE_KEYS = {
     "mcap": None, "tqdm": "python3-tqdm", "dask": None, "distributed": None, "pyarrow": None,
     "pandas": "python3-pandas", "xarray": None,
     "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
+    "pdoc": None,  # the 'docs' extra (gyro_sim/api_docs.py)
 }
 #: pip requirement of setup.py → rosdep key (ros-* wheels: the ROS package of that name)
 PIP_KEYS = {

@@ -321,7 +321,8 @@ print('no dask:', not any(m.split('.')[0] in ('dask', 'distributed') for m in sy
 """
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert p.returncode == 0, p.stderr
-    assert "refused: running on Dask needs the sweep extra" in p.stdout and "no dask: True" in p.stdout
+    assert "refused: run_sweep needs the 'sweep' extra: pip install 'gyro_sim[sweep]' (missing: dask, distributed); " \
+           "or --workers 0" in p.stdout and "no dask: True" in p.stdout
 
 
 # ------------------------------------------------------------------------------------------
