@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Optional, Union
 
 import numpy as np
 
+from .extras import MissingExtra, require
+
 if TYPE_CHECKING:  # pragma: no cover
     from .recording import BagData
     from .simulate import RunResult
@@ -56,21 +58,17 @@ WXYZ = ("w", "x", "y", "z")
 ANGLES = ("psi", "theta", "phi")
 
 
-class MissingExtraError(ImportError):
-    """An optional dependency of the ``data`` extra (pandas, xarray) is not importable."""
+#: an optional dependency of the ``data`` extra (pandas, xarray) is not importable (gyro_sim.extras' one-line error)
+MissingExtraError = MissingExtra
 
 
 def _need(module: str, what: str):
-    """The module ``module`` of the ``data`` extra, imported; else MissingExtraError naming ``what`` needs it."""
-    try:
-        if module == "pandas":
-            import pandas as mod
-        else:
-            import xarray as mod
-    except ImportError as e:
-        raise MissingExtraError(f"{what} needs {module}, of the optional extra 'data' ({e}): {INSTALL_DATA}") \
-            from None
-    return mod
+    """The module ``module`` of the ``data`` extra, imported; else MissingExtraError naming ``what`` needs it
+    (checked before any work: :func:`gyro_sim.extras.require`)."""
+    require("data", what, (module,))
+    import importlib
+
+    return importlib.import_module(module)
 
 
 def _frame(res: "RunResult", name: str) -> str:
