@@ -38,7 +38,8 @@ setup(
         ('lib/gyro_ctl', ['scripts/controller']),
         ('share/gyro_ctl', ['resource/gyro_ctl_manifest/package.xml']),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        # the scenes, the nodes' parameter files and the Foxglove layout (config/foxglove_layout.json)
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml')) + sorted(glob('config/*.json'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     python_requires='>=3.10',

@@ -30,6 +30,7 @@ INDEX = "share/ament_index/resource_index/packages/"
 DATA_FILES = [INDEX + "gyro_sim", INDEX + "gyro_ctl",
               "share/gyro_sim/package.xml", "share/gyro_ctl/package.xml", "share/gyro_sim/launch/gyro_sim.launch.py",
               "share/gyro_sim/config/simulator.params.yaml", "share/gyro_sim/config/controller.params.yaml",
+              "share/gyro_sim/config/foxglove_layout.json",
               "lib/gyro_sim/simulator", "lib/gyro_ctl/controller"]
 ROS_MISSING = "needs the ROS 2 Python packages (rclpy): pip install 'gyro_sim[ros]' (or source a ROS 2 install)"
 
