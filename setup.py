@@ -79,7 +79,7 @@ setup(
             'colcon-ros>=0.5',
             'colcon-python-setup-py>=0.2.9',
             'colcon-package-information>=0.4',  # `colcon list`
-            'websockets>=12',  # the test client of the live view (Foxglove WebSocket protocol)
+            'websockets>=15',  # the test client of the live view (Foxglove WebSocket protocol; proxy=None needs 15)
         ],
         # RunResult.to_dataframe() / to_xarray() (gyro_sim/results.py)
         'data': [

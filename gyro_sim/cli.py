@@ -1,7 +1,7 @@
 """The ``gyro-sim`` command.
 
     gyro-sim run SCENE [--duration S] [--out DIR] [--record BAG] [--fidelity F] [--ros [--mode M]]
-                   [--live [--rate-factor F] [--live-port N] [--live-host H] [--live-wait N]]
+                   [--live [--rate-factor F] [--live-port N] [--live-host H] [--live-wait N] [--live-hold S]]
     gyro-sim scenes                 list the built-in scenes
     gyro-sim info BAG               topics, counts, duration, scene of a recorded run
     gyro-sim plot BAG [--out PNG]   spin rate, θ, L and stator currents of a recorded run
@@ -113,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--live-wait", metavar="N", type=int, default=0,
                      help="with --live: start the run once N channel subscriptions are made, so a client connected "
                           "first misses no sample (default 0: start at once)")
+    run.add_argument("--live-hold", metavar="S", type=float, default=2.0,
+                     help="with --live: after the run, keep serving until the clients unsubscribe, at most S wall "
+                          "seconds (default 2), so they get the last samples")
     run.add_argument("--fidelity", choices=("full", "averaged", "auto"), default=None,
                      help="model fidelity instead of the scene's (in-process only; gyro_sim/fidelity.py)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
@@ -354,6 +357,8 @@ def _live_usage(args):
         return f"--live-port {args.live_port}: must be a TCP port, 0 to 65535 (0: a free one)"
     if args.live_wait < 0:
         return f"--live-wait {args.live_wait}: must be an integer >= 0"
+    if not (math.isfinite(args.live_hold) and args.live_hold >= 0):
+        return f"--live-hold {args.live_hold}: must be a number of seconds >= 0"
     if args.fidelity not in (None, "full"):
         return f"--fidelity {args.fidelity}: --live streams the full model's samples; drop --live or --fidelity"
     from gyro_sim.live import LIVE_MISSING, LiveUnavailable, require_foxglove
@@ -448,6 +453,12 @@ def _cmd_run(args) -> int:
                 # --live: the attitude is integrated whatever output.attitude says (/tf and /gyro/imu need it)
                 result = simulate.run(scene, duration=args.duration, on_samples=on_samples,
                                       attitude=True if live is not None else None)
+        if live is not None:
+            try:
+                with sigterm_as_interrupt():
+                    live.hold(args.live_hold)
+            except KeyboardInterrupt:  # (the run is complete: a signal here only stops the hold)
+                pass
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     except RecordingError as exc:

@@ -28,8 +28,9 @@ channel                schema (JSON)                    content (SI units; frame
 Message times (the protocol's ``timestamp``, the app's receive time) and the server time (``Time`` capability)
 are the simulation time in ns, as the bags' log times. Pacing: sample t is sent at wall time
 t0 + (t − t_first) / rate_factor (a run that cannot keep up is sent as fast as it goes, its clock slipped, not
-caught up in a burst). ``wait_subscriptions`` holds the run's start until that many channel subscriptions
-(summed over clients) are made, so a client connected first misses no sample.
+caught up in a burst). :meth:`LiveView.wait_for_subscriptions` holds the run's start until that many channel
+subscriptions (summed over clients) are made, so a client connected first misses no sample; :meth:`LiveView.hold`
+keeps serving after the run until the clients unsubscribe (or a time limit), so none misses the last ones.
 """
 from __future__ import annotations
 
@@ -136,6 +137,7 @@ class _Subscriptions:
     def on_unsubscribe(self, client, channel) -> None:
         with self.changed:
             self.count -= 1
+            self.changed.notify_all()
 
 
 class LiveView:
@@ -233,9 +235,19 @@ class LiveView:
                          s["current"][i], s["rate"][i], s["phase"][i],
                          {k: v[i] for k, v in eff.items()} if eff else None)
 
+    def hold(self, seconds: float, poll: float = 0.2) -> None:
+        """After the run: keep serving until every subscription is gone (the clients got what was sent and left)
+        or ``seconds`` wall seconds have passed, so the last samples are not cut off by :meth:`close`."""
+        end = self._clock() + seconds
+        with self.subs.changed:
+            while self.subs.count > 0 and self._clock() < end:
+                self.subs.changed.wait(min(poll, max(end - self._clock(), 0.0)))
+
     def close(self) -> None:
-        """Stop the server (clients are disconnected)."""
-        self.server.stop()
+        """Stop the server (clients are disconnected); idempotent."""
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
 
     def __enter__(self) -> "LiveView":
         return self

@@ -312,6 +312,7 @@ MODULE_KEYS = {
     "numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml", "numba": "python3-numba",
     "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
     "mcap": None, "tqdm": "python3-tqdm", "dask": None, "distributed": None, "pyarrow": None,
+    "foxglove": None,  # foxglove-sdk (the extra 'live')
     "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
 }
 #: pip requirement of setup.py → rosdep key (ros-* wheels: the ROS package of that name)
@@ -320,6 +321,7 @@ PIP_KEYS = {
     "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
     "mcap": None, "pytest": "python3-pytest", "hypothesis": "python3-hypothesis", "mpmath": None,
     "mcap-ros2-support": "mcap-ros2-support", "dask": None, "pyarrow": None, "tqdm": "python3-tqdm",
+    "websockets": "python3-websockets", "foxglove-sdk": None,
 }
 #: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
 #: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed
