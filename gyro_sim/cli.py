@@ -452,7 +452,7 @@ def _cmd_run(args) -> int:
             with sigterm_as_interrupt():
                 # --live: the attitude is integrated whatever output.attitude says (/tf and /gyro/imu need it)
                 result = simulate.run(scene, duration=args.duration, on_samples=on_samples,
-                                      attitude=True if live is not None else None)
+                                      **({"attitude": True} if live is not None else {}))
         if live is not None:
             try:
                 with sigterm_as_interrupt():
