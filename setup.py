@@ -38,7 +38,8 @@ setup(
         ('lib/gyro_ctl', ['scripts/controller']),
         ('share/gyro_ctl', ['resource/gyro_ctl_manifest/package.xml']),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        # the scenes, the nodes' parameter files and the Foxglove layout (config/foxglove_layout.json)
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml')) + sorted(glob('config/*.json'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     python_requires='>=3.10',
@@ -78,7 +79,7 @@ setup(
             'colcon-ros>=0.5',
             'colcon-python-setup-py>=0.2.9',
             'colcon-package-information>=0.4',  # `colcon list`
-            'websockets>=12',  # the test client of the live view (Foxglove WebSocket protocol)
+            'websockets>=15',  # the test client of the live view (Foxglove WebSocket protocol; proxy=None needs 15)
         ],
         # RunResult.to_dataframe() / to_xarray() (gyro_sim/results.py)
         'data': [

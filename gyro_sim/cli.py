@@ -1,6 +1,7 @@
 """The ``gyro-sim`` command.
 
     gyro-sim run SCENE [--duration S] [--out DIR] [--record BAG] [--fidelity F] [--ros [--mode M]]
+                   [--live [--rate-factor F] [--live-port N] [--live-host H] [--live-wait N] [--live-hold S]]
     gyro-sim scenes                 list the built-in scenes
     gyro-sim info BAG               topics, counts, duration, scene of a recorded run
     gyro-sim plot BAG [--out PNG]   spin rate, θ, L and stator currents of a recorded run
@@ -107,7 +108,21 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--mode", choices=("lockstep", "realtime", "freerun"), default="lockstep",
                      help="with --ros: timing mode of the simulator node (default: lockstep)")
     run.add_argument("--rate-factor", metavar="F", type=float, default=1.0,
-                     help="with --ros --mode realtime: simulated seconds per wall second")
+                     help="with --ros --mode realtime, or --live: simulated seconds per wall second (default 1)")
+    run.add_argument("--live", action="store_true",
+                     help="serve the run over the Foxglove WebSocket protocol while it runs, paced to the wall clock "
+                          "x --rate-factor (in-process; needs pip install 'gyro_sim[live]'; layout: "
+                          "config/foxglove_layout.json)")
+    run.add_argument("--live-host", metavar="HOST", default="127.0.0.1",
+                     help="with --live: address to listen on (default 127.0.0.1: this machine only)")
+    run.add_argument("--live-port", metavar="N", type=int, default=8765,
+                     help="with --live: TCP port (default 8765, Foxglove's; 0 = a free one, printed)")
+    run.add_argument("--live-wait", metavar="N", type=int, default=0,
+                     help="with --live: start the run once N channel subscriptions are made, so a client connected "
+                          "first misses no sample (default 0: start at once)")
+    run.add_argument("--live-hold", metavar="S", type=float, default=2.0,
+                     help="with --live: after the run, keep serving until the clients unsubscribe, at most S wall "
+                          "seconds (default 2), so they get the last samples")
     run.add_argument("--fidelity", choices=("full", "averaged", "auto"), default=None,
                      help="model fidelity instead of the scene's (in-process only; gyro_sim/fidelity.py)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
@@ -346,9 +361,58 @@ class _Progress:
             self.shown = False
 
 
+def _live_usage(args):
+    """Why the --live options cannot be used (checked before any work), or None."""
+    if args.ros:
+        return ("--live serves an in-process run; with --ros, serve the nodes' topics with foxglove_bridge "
+                "(ros2 launch foxglove_bridge foxglove_bridge_launch.xml), or drop --ros")
+    if not (math.isfinite(args.rate_factor) and args.rate_factor > 0):
+        return f"--rate-factor {args.rate_factor}: must be a positive number (simulated s per wall s)"
+    if not 0 <= args.live_port <= 65535:
+        return f"--live-port {args.live_port}: must be a TCP port, 0 to 65535 (0: a free one)"
+    if args.live_wait < 0:
+        return f"--live-wait {args.live_wait}: must be an integer >= 0"
+    if not (math.isfinite(args.live_hold) and args.live_hold >= 0):
+        return f"--live-hold {args.live_hold}: must be a number of seconds >= 0"
+    if args.fidelity not in (None, "full"):
+        return f"--fidelity {args.fidelity}: --live streams the full model's samples; drop --live or --fidelity"
+    from gyro_sim.live import LIVE_MISSING, LiveUnavailable, require_foxglove
+
+    try:
+        require_foxglove()
+    except LiveUnavailable:
+        return f"gyro-sim run --live {LIVE_MISSING}"
+    return None
+
+
+def _start_live(args, scene):
+    """The live view's server (gyro_sim.live.LiveView), announced on stderr; (None, error text) if it cannot
+    listen. Waits for --live-wait subscriptions."""
+    from gyro_sim.live import LiveView
+    from gyro_sim.scene import config_dir
+
+    try:
+        live = LiveView(scene, host=args.live_host, port=args.live_port, rate_factor=args.rate_factor)
+    except Exception as exc:  # (the SDK's error for an address in use or not resolvable)
+        return None, f"--live: cannot listen on {args.live_host}:{args.live_port}: {exc}"
+    layout = config_dir() / "foxglove_layout.json"
+    _write(sys.stderr, f"live view: ws://{args.live_host}:{live.port} (Foxglove: Open connection > Foxglove WebSocket; "
+                       f"layout {layout}), {args.rate_factor:g}x real time\n")
+    sys.stderr.flush()
+    if args.live_wait:
+        _write(sys.stderr, f"live view: waiting for {args.live_wait} subscription(s)\n")
+        sys.stderr.flush()
+        live.wait_for_subscriptions(args.live_wait)
+    return live, None
+
+
 def _cmd_run(args) -> int:
-    if args.ros and _ros_missing("gyro-sim run --ros"):
+    if args.ros and not args.live and _ros_missing("gyro-sim run --ros"):
         return EXIT_USAGE
+    if args.live:
+        bad = _live_usage(args)
+        if bad:
+            return _error(bad)
     # Imported here so that --help works fast and without the numerical stack.
     from gyro_sim import plotting
     from gyro_sim import scene as scene_mod
@@ -382,15 +446,34 @@ def _cmd_run(args) -> int:
 
     progress = _Progress(args.duration or scene.duration, not args.quiet and sys.stderr.isatty())
     png = Path(args.out) / f"{name}.png"
+    live = None
     try:
+        on_samples = progress
+        if args.live:
+            with sigterm_as_interrupt():  # (Ctrl-C / SIGTERM while waiting for --live-wait)
+                live, bad = _start_live(args, scene)
+            if bad:
+                return _error(bad)
+
+            def on_samples(s, live=live):
+                progress(s)
+                live(s)
         if args.record is not None:
             # streamed: the bag is written as the run goes (a signal or a full disk leaves it closed with
             # everything up to then); it integrates the attitude whatever output.attitude says (/gyro/imu needs it)
             # (keep_bytes=0: the summary and the plot need only its preview, so memory stays flat)
-            result = record_run(scene, args.record, duration=args.duration, on_samples=progress, keep_bytes=0)
+            result = record_run(scene, args.record, duration=args.duration, on_samples=on_samples, keep_bytes=0)
         else:
             with sigterm_as_interrupt():
-                result = simulate.run(scene, duration=args.duration, on_samples=progress)
+                # --live: the attitude is integrated whatever output.attitude says (/tf and /gyro/imu need it)
+                result = simulate.run(scene, duration=args.duration, on_samples=on_samples,
+                                      **({"attitude": True} if live is not None else {}))
+        if live is not None:
+            try:
+                with sigterm_as_interrupt():
+                    live.hold(args.live_hold)
+            except KeyboardInterrupt:  # (the run is complete: a signal here only stops the hold)
+                pass
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     except RecordingError as exc:
@@ -404,11 +487,16 @@ def _cmd_run(args) -> int:
             _write(sys.stderr, f"interrupted ({_signal_name(code)}) at t = {progress.t:.6g} s; nothing was recorded "
                                "(--record BAG writes a run as it goes)\n")
             return code
+        if not args.record.exists():  # (stopped while --live-wait waited)
+            _write(sys.stderr, f"interrupted ({_signal_name(code)}) before the run started; nothing recorded\n")
+            return code
         _write(sys.stderr, f"interrupted ({_signal_name(code)}): the bag holds the run up to the signal\n")
         _summarise_bag(args.record, png)
         return code
     finally:
         progress.close()
+        if live is not None:
+            live.close()
     try:
         plotting.plot_run(result.preview(), png)
     except OSError as exc:

@@ -30,6 +30,7 @@ INDEX = "share/ament_index/resource_index/packages/"
 DATA_FILES = [INDEX + "gyro_sim", INDEX + "gyro_ctl",
               "share/gyro_sim/package.xml", "share/gyro_ctl/package.xml", "share/gyro_sim/launch/gyro_sim.launch.py",
               "share/gyro_sim/config/simulator.params.yaml", "share/gyro_sim/config/controller.params.yaml",
+              "share/gyro_sim/config/foxglove_layout.json",
               "lib/gyro_sim/simulator", "lib/gyro_ctl/controller"]
 ROS_MISSING = "needs the ROS 2 Python packages (rclpy): pip install 'gyro_sim[ros]' (or source a ROS 2 install)"
 
@@ -312,6 +313,7 @@ MODULE_KEYS = {
     "pydantic": "python3-pydantic", "matplotlib": "python3-matplotlib", "rosbags": "python3-rosbags-pip",
     "mcap": None, "tqdm": "python3-tqdm", "dask": None, "distributed": None, "pyarrow": None,
     "pandas": "python3-pandas", "xarray": None,
+    "foxglove": None,  # foxglove-sdk (the extra 'live')
     "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
     "pdoc": None,  # the 'docs' extra (gyro_sim/api_docs.py)
 }
@@ -322,6 +324,7 @@ PIP_KEYS = {
     "mcap": None, "pytest": "python3-pytest", "hypothesis": "python3-hypothesis", "mpmath": None,
     "mcap-ros2-support": "mcap-ros2-support", "dask": None, "pyarrow": None, "tqdm": "python3-tqdm",
     "pandas": "python3-pandas", "xarray": None,
+    "websockets": "python3-websockets", "foxglove-sdk": None,
 }
 #: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
 #: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed

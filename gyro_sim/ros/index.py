@@ -29,7 +29,7 @@ def layout(root: Path) -> dict[str, Path]:
     out = {f"share/ament_index/resource_index/packages/{p}": root / "resource" / p for p in PACKAGES}
     out["share/gyro_sim/package.xml"] = root / "package.xml"
     out["share/gyro_ctl/package.xml"] = root / "resource" / "gyro_ctl_manifest" / "package.xml"
-    for sub, pattern in (("config", "*.yaml"), ("launch", "*.launch.py")):
+    for sub, pattern in (("config", "*.yaml"), ("config", "*.json"), ("launch", "*.launch.py")):
         out.update({f"share/gyro_sim/{sub}/{f.name}": f for f in sorted((root / sub).glob(pattern))})
     out.update({dest: root / src for dest, src in EXECUTABLES.items()})
     return out
