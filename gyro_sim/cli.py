@@ -376,12 +376,12 @@ def _live_usage(args):
         return f"--live-hold {args.live_hold}: must be a number of seconds >= 0"
     if args.fidelity not in (None, "full"):
         return f"--fidelity {args.fidelity}: --live streams the full model's samples; drop --live or --fidelity"
-    from gyro_sim.live import LIVE_MISSING, LiveUnavailable, require_foxglove
+    from gyro_sim.live import LiveUnavailable, require_foxglove
 
     try:
         require_foxglove()
-    except LiveUnavailable:
-        return f"gyro-sim run --live {LIVE_MISSING}"
+    except LiveUnavailable as e:
+        return str(e)
     return None
 
 

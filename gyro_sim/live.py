@@ -39,14 +39,15 @@ import threading
 import time
 from typing import Any, Optional
 
+from .extras import MissingExtra, require
 from .messages import (TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATORS,
                        TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, effects_message, stamp_ns, state_messages)
 
-__all__ = ["LIVE_MISSING", "LiveUnavailable", "require_foxglove", "LiveView", "CHANNELS", "json_schema",
+__all__ = ["LIVE_WHAT", "LiveUnavailable", "require_foxglove", "LiveView", "CHANNELS", "json_schema",
            "frame_transforms"]
 
-#: the one line for a missing foxglove-sdk (after ``error: <what> ``)
-LIVE_MISSING = "needs the foxglove-sdk package: pip install 'gyro_sim[live]'"
+#: what needs the extra ``live``, in the one-line message of :func:`gyro_sim.extras.require`
+LIVE_WHAT = "gyro-sim run --live"
 
 #: the channels advertised at the start, in the order each sample logs them (``/gyro/effects`` comes on first use)
 CHANNELS: tuple[str, ...] = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_TF,
@@ -67,17 +68,20 @@ FRAME_TRANSFORMS_SCHEMA = {
                        "child_frame_id": {"type": "string"}, "translation": _VEC, "rotation": _QUAT}}}}}
 
 
-class LiveUnavailable(RuntimeError):
-    """foxglove-sdk cannot be imported (the extra ``live`` is not installed)."""
+#: foxglove-sdk cannot be imported (the extra ``live`` is not installed): gyro_sim.extras' one-line error
+LiveUnavailable = MissingExtra
 
 
 def require_foxglove():
-    """The ``foxglove`` module, or :class:`LiveUnavailable` naming the extra to install."""
+    """The ``foxglove`` module, or :class:`LiveUnavailable` naming the extra to install (one message format for
+    every extra: :func:`gyro_sim.extras.require`)."""
+    require("live", LIVE_WHAT)
     try:
         import foxglove
         from foxglove.websocket import Capability  # noqa: F401  (the server part: not in every build)
-    except ImportError:
-        raise LiveUnavailable(LIVE_MISSING) from None
+    except ImportError as e:  # found but unusable (a build without the server part)
+        raise MissingExtra(f"{LIVE_WHAT} needs foxglove-sdk with its WebSocket server ({e}): "
+                           "pip install --upgrade 'gyro_sim[live]'", "live", ("foxglove",)) from None
     return foxglove
 
 

@@ -209,7 +209,7 @@ def test_live_without_foxglove_is_one_line_before_any_work(tmp_path):
                         "--record", str(tmp_path / "bag")], capture_output=True, text=True, timeout=300,
                        cwd=tmp_path, env=env)
     assert (r.returncode, r.stderr.splitlines()) == (
-        2, ["error: gyro-sim run --live needs the foxglove-sdk package: pip install 'gyro_sim[live]'"]), r.stderr
+        2, ["error: gyro-sim run --live needs the 'live' extra: pip install 'gyro_sim[live]' (missing: foxglove)"]), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]  # nothing was run or written
 
 
