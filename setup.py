@@ -112,11 +112,11 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'gyro-sim = gyro_sim.cli:main',
+            'gyro-sim = gyro_sim.apps.cli:main',
             'gyro-sim-simulator = gyro_sim.ros.simulator_node:main',
             'gyro-ctl-controller = gyro_ctl.ros.controller_node:main',
         ],
-        # the gyro_bench fixture for a user's own tests of a controller (gyro_sim/testing.py)
-        'pytest11': ['gyro_sim = gyro_sim.testing'],
+        # the gyro_bench fixture for a user's own tests of a controller (gyro_sim/apps/testing.py)
+        'pytest11': ['gyro_sim = gyro_sim.apps.testing'],
     },
 )

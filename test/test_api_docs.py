@@ -19,11 +19,11 @@ ROOT = Path(__file__).resolve().parents[1]
 #: page → names it must document (pdoc's anchor ids)
 PUBLIC = {
     "gyro_sim.html": ["load_scene", "run", "Simulator", "RunResult", "Scene", "SceneError", "builtin_scenes"],
-    "gyro_sim/simulate.html": ["run", "Simulator", "RunResult", "RunResult.summary", "Simulator.advance",
+    "gyro_sim/engine/simulate.html": ["run", "Simulator", "RunResult", "RunResult.summary", "Simulator.advance",
                                "Simulator.set_stator"],
-    "gyro_sim/scene.html": ["load_scene", "Scene"],
-    "gyro_sim/recording.html": ["record_run", "read_bag", "bag_info"],
-    "gyro_sim/extras.html": ["require", "MissingExtra"],
+    "gyro_sim/scenes/scene.html": ["load_scene", "Scene"],
+    "gyro_sim/io/recording.html": ["record_run", "read_bag", "bag_info"],
+    "gyro_sim/common/extras.html": ["require", "MissingExtra"],
     "gyro_ctl/laws.html": ["make_law", "ControlInput"],
     "gyro_ctl/config.html": ["ControllerConfig"],
 }
@@ -40,7 +40,7 @@ def built(tmp_path_factory):
 def test_api_reference_builds_without_warnings(built):
     assert built.warnings == [], "\n".join(built.warnings)
     assert (built.out / "index.html").is_file() and (built.out / "search.js").is_file()
-    assert {"gyro_sim", "gyro_ctl", "gyro_sim.simulate", "gyro_sim.recording", "gyro_ctl.laws"} <= set(built.modules)
+    assert {"gyro_sim", "gyro_ctl", "gyro_sim.engine.simulate", "gyro_sim.io.recording", "gyro_ctl.laws"} <= set(built.modules)
     assert not any(part.startswith("_") for m in built.modules for part in m.split("."))
 
 

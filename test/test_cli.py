@@ -103,8 +103,8 @@ SCENES = {
 def fakes(monkeypatch, tmp_path):
     """Install fake gyro_sim.scene / gyro_sim.simulate; record the calls made."""
     calls = {"load": [], "run": []}
-    scene_mod = types.ModuleType("gyro_sim.scene")
-    sim_mod = types.ModuleType("gyro_sim.simulate")
+    scene_mod = types.ModuleType("gyro_sim.scenes.scene")  # (the homes the cli imports from; issue 22)
+    sim_mod = types.ModuleType("gyro_sim.engine.simulate")
 
     def load_scene(name_or_path, overrides=None):
         calls["load"].append(name_or_path)
@@ -235,7 +235,7 @@ def test_scene_error_exits_2_with_message_and_no_traceback(fakes, tmp_path, caps
 def test_scene_error_raised_by_the_simulator_also_exits_2(fakes, monkeypatch, tmp_path, capsys):
     def bad_run(scene, duration=None, on_samples=None):
         raise FakeSceneError("stator 'x' has no coils")
-    monkeypatch.setattr(sys.modules["gyro_sim.simulate"], "run", bad_run)
+    monkeypatch.setattr(sys.modules["gyro_sim.engine.simulate"], "run", bad_run)
     assert cli.main(["run", "steer_solid", "--out", str(tmp_path)]) == 2
     assert capsys.readouterr().err == "error: stator 'x' has no coils\n"
 
@@ -258,7 +258,7 @@ def test_scenes_lists_names_with_first_line_of_description(fakes, capsys):
 
 
 def test_scenes_reports_a_broken_scene_and_exits_2(fakes, monkeypatch, tmp_path, capsys):
-    mod = sys.modules["gyro_sim.scene"]
+    mod = sys.modules["gyro_sim.scenes.scene"]
     good = mod.builtin_scenes
     monkeypatch.setattr(mod, "builtin_scenes", lambda: {**good(), "broken": tmp_path / "broken.yaml"})
     assert cli.main(["scenes"]) == 2

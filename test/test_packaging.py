@@ -373,9 +373,9 @@ def test_manifest_declares_every_import():
     pkg = manifest(ROOT / "package.xml")
     pkg.validate()
     modules = imported_modules("gyro_sim") | imported_modules("gyro_ctl") | imported_modules("launch")
-    # pytest: imported only by gyro_sim/testing.py, the pytest plugin (entry point pytest11), which runs inside
+    # pytest: imported only by gyro_sim/apps/testing.py, the pytest plugin (entry point pytest11), which runs inside
     # pytest alone: a test dependency of the package, not a run dependency
-    plugin = ROOT / "gyro_sim" / "testing.py"
+    plugin = ROOT / "gyro_sim" / "apps" / "testing.py"
     for path in (ROOT / "gyro_sim").rglob("*.py"):
         tree = ast.parse(path.read_text(encoding="utf-8"))
         imports = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}

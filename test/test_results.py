@@ -293,7 +293,7 @@ def test_read_bag_is_the_run_result_reader():
     assert gyro_sim.read_bag is results.read_bag and "read_bag" in gyro_sim.__all__
     from gyro_sim import testing
 
-    assert testing.result_from_bag.__module__ == "gyro_sim.testing"  # (the kit's name, kept)
+    assert testing.result_from_bag.__module__ == "gyro_sim.apps.testing"  # (the kit's home; gyro_sim.testing kept)
 
 
 @pytest.mark.parametrize("recorder", ["record_result", "record_run"])

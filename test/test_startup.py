@@ -42,8 +42,8 @@ def test_importing_run_imports_no_scipy_subpackage():
 
 
 @pytest.mark.parametrize("scene, stepper, unused", [
-    ("spinup_thin_shell", "frozen_flow", ("gyro_sim.kernels.integrate", "gyro_sim.kernels.integrate_free")),
-    ("three_stators", "lawson8", ("gyro_sim.frozen_flow.integrate_frozen", "gyro_sim.kernels.integrate_free")),
+    ("spinup_thin_shell", "frozen_flow", ("gyro_sim.compiled.kernels.integrate", "gyro_sim.compiled.kernels.integrate_free")),
+    ("three_stators", "lawson8", ("gyro_sim.compiled.frozen_flow.integrate_frozen", "gyro_sim.compiled.kernels.integrate_free")),
 ])
 def test_a_run_loads_only_what_its_scene_uses(scene, stepper, unused):
     """A run imports no SciPy subpackage it does not use (its error estimate imported gyro_sim.fidelity, hence

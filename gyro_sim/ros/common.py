@@ -13,9 +13,9 @@ from typing import Callable, Iterable, Optional
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..messages import QOS, stamp_ns
-from ..scene_text import clip, preview
-from .launch import PARENT_PID_ENV, STOP_SIGNALS, signal_name  # (launch.py: no rclpy)
+from gyro_sim.io.messages import QOS, stamp_ns
+from gyro_sim.scenes.scene_text import clip, preview
+from gyro_sim.ros.launch import PARENT_PID_ENV, STOP_SIGNALS, signal_name  # (launch.py: no rclpy)
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
@@ -173,7 +173,7 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
         import rclpy
         from rclpy.exceptions import ParameterException
 
-        from ..scene import SceneError
+        from gyro_sim.scenes.scene import SceneError
 
         # rclpy's own handlers (SignalHandlerOptions.ALL) would shut the context down on SIGINT/SIGTERM, under the
         # loop, and chain to Python's SIGINT handler (KeyboardInterrupt): no clean end of the run, status -2

@@ -15,10 +15,10 @@ import rclpy
 from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 
-from ..messages import QOS, TOPICS, node_topic
-from .common import (StopEvent, exit_status, flush_publishers, message_class, qos_profile, stop_on_signals,
+from gyro_sim.io.messages import QOS, TOPICS, node_topic
+from gyro_sim.ros.common import (StopEvent, exit_status, flush_publishers, message_class, qos_profile, stop_on_signals,
                      wait_for_matches)
-from .launch import signal_name
+from gyro_sim.ros.launch import signal_name
 
 
 def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wait_for: int = 0,

@@ -44,16 +44,16 @@ import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
-from ..messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
+from gyro_sim.io.messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
                         TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS,
                         TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, diagnostics_message, effects_message,
                         node_topic, scene_message, stamp_ns, state_messages, status_message, to_ros)
-from ..compile_watch import announce_compiles, compile_seconds
-from ..faults import FaultConfig, Faults
-from ..scene import SceneError, load_scene
-from ..recording import STREAM_BUFFER_ROWS, RecordingError
-from ..simulate import Runner, controller_period
-from .common import (BUSY_POLL, exit_status, make_executor, message_class, node_main, parse_command, qos_profile,
+from gyro_sim.compiled.compile_watch import announce_compiles, compile_seconds
+from gyro_sim.engine.faults import FaultConfig, Faults
+from gyro_sim.scenes.scene import SceneError, load_scene
+from gyro_sim.io.recording import STREAM_BUFFER_ROWS, RecordingError
+from gyro_sim.engine.simulate import Runner, controller_period
+from gyro_sim.ros.common import (BUSY_POLL, exit_status, make_executor, message_class, node_main, parse_command, qos_profile,
                      signal_name, take, wait_for_matches)
 
 MODES = ("lockstep", "realtime", "freerun")
@@ -310,7 +310,7 @@ class Loop:
         self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
         self.new_run()  # before the bag is opened: a run that cannot be made leaves no half-written bag
         if p["record"]:
-            from ..recording import BagRecorder, scene_text, stator_frames
+            from gyro_sim.io.recording import BagRecorder, scene_text, stator_frames
 
             self.recorder = BagRecorder(p["record"], scene_text(node.scene), node.scene.name,
                                         extra={"gyro_sim.mode": p["mode"],
@@ -590,7 +590,7 @@ class Loop:
         try:
             node.publish(TOPIC_SCENE, scene_message(_scene_text(node.scene)))
             if node.tf:
-                from ..recording import stator_frames
+                from gyro_sim.io.recording import stator_frames
 
                 node.publish(TOPIC_TF_STATIC, stator_frames(node.scene))
             want = p["wait_for_subscribers"]
@@ -705,7 +705,7 @@ class Loop:
 
 
 def _scene_text(scene) -> str:
-    from ..recording import scene_text
+    from gyro_sim.io.recording import scene_text
 
     return scene_text(scene)
 
@@ -733,7 +733,7 @@ def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
 
 def main(args=None) -> int:
     """Entry point (`ros2 run gyro_sim simulator`, console script `gyro-sim-simulator`)."""
-    from .common import node_usage
+    from gyro_sim.ros.common import node_usage
 
     usage = node_usage("ros2 run gyro_sim simulator", [(n, "(the scene's)" if d is None else d, t + (
         " (read-only)" if ro else "")) for n, d, t, _, ro in PARAMETERS])

@@ -1,0 +1,39 @@
+"""Compile the numba kernels of the built-in scenes ahead of their first run (``gyro-sim warmup``).
+
+A kernel compiles on its first use with an install (then it is loaded from numba's on-disk cache, see
+:mod:`gyro_sim.compile_watch`). ``.ci/setup`` runs this once after installing, so the README's first commands
+start at once; any other install (a plain ``pip install .``, colcon, a Dask worker with its own cache) pays the
+same compile once, announced by one line, and can run ``gyro-sim warmup`` too.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable, Iterable, Optional
+
+from gyro_sim.compiled.compile_watch import compile_seconds
+
+__all__ = ["warm"]
+
+#: simulated seconds each scene runs: long enough to pass its first control tick and output sample
+WARM_DURATION = 0.05
+
+
+def warm(names: Optional[Iterable[str]] = None, say: Callable[[str], None] = print) -> float:
+    """Run each scene (default: every built-in one) for :data:`WARM_DURATION` s, as scenes run and as the ROS node
+    and recordings run them (with the attitude), so every kernel they use is compiled and cached. Returns the
+    compile seconds spent (0 where the cache was warm)."""
+    from gyro_sim.scenes.scene import builtin_scenes, load_scene
+    from gyro_sim.engine.simulate import run
+
+    c_start = compile_seconds()
+    for name in names or list(builtin_scenes()):
+        c0, w0 = compile_seconds(), time.perf_counter()
+        scene = load_scene(name)
+        d = min(scene.duration, WARM_DURATION)
+        run(scene, duration=d)
+        if scene.fidelity != "full" or not scene.output.attitude:
+            run(load_scene(name, overrides={"fidelity": "full"}), duration=d, attitude=True)
+        c = compile_seconds() - c0
+        if c > 0:
+            say(f"warmup: {name}: compiled in {c:.1f} s ({time.perf_counter() - w0:.1f} s)")
+    return compile_seconds() - c_start
