@@ -292,15 +292,17 @@ def test_a_python_law_in_LAWS_runs_at_every_tick(monkeypatch):
 
 
 def test_a_first_lawson8_segment_in_the_tick_loop(monkeypatch):
-    """lawson8's table is made on first use (simulate._tableau): a process whose first lawson8 segment is taken by
+    """lawson8's table is made on first use (engine.model._tableau, re-exported by gyro_sim.simulate): a process whose first lawson8 segment is taken by
     the compiled tick loop (nutation_slow at fidelity auto: its full-model stretch after the averaged one) ran into
     a KeyError there (`gyro-sim bench --only ticks` in a new process); it must build the table and give the Python
     loop's numbers."""
-    monkeypatch.setattr(simulate, "_TABLEAU", {})
+    from gyro_sim.engine import model  # (the table's home: a name re-exported by simulate is a copy of the reference)
+
+    monkeypatch.setattr(model, "_TABLEAU", {})
     scene = gyro_sim.load_scene("nutation_slow", overrides={"fidelity": "auto", "accuracy.rtol": 2e-3})
     a = gyro_sim.run(scene, duration=8.0)
-    assert "lawson8" in simulate._TABLEAU
-    monkeypatch.setattr(simulate, "_TABLEAU", {})
+    assert "lawson8" in model._TABLEAU
+    monkeypatch.setattr(model, "_TABLEAU", {})
     with python_ticks():
         b = gyro_sim.run(scene, duration=8.0)
     print(f"\n  nutation_slow auto (rtol 2e-3), 8 s: {a.steps} steps, θ end {np.degrees(a.theta[-1]):.4f}°")

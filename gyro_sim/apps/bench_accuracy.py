@@ -194,7 +194,7 @@ def _one(name: str, T: float, what: str, fidelity: str, ref, over: dict, legacy_
 
 def accuracy_part(res, quick: bool, scenes: Optional[list] = None, say=print) -> AccResults:
     """Run the part (module docstring); the rows go to ``res.accuracy`` (an :class:`AccResults`)."""
-    from gyro_sim.apps.bench import fidelity_levels
+    from gyro_sim.apps.bench_core import fidelity_levels
     from gyro_sim.scenes.scene import builtin_scenes, load_scene
 
     out = AccResults()

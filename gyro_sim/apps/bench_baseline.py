@@ -22,7 +22,7 @@ from typing import Optional, Sequence
 import numpy as np
 from numba import njit
 
-from gyro_sim.apps.bench import RK4_METHOD  # the method label of the tables, CSV and plot
+from gyro_sim.apps.bench_core import RK4_METHOD  # the method label of the tables, CSV and plot
 
 __all__ = ["RK4_METHOD", "RK4_STEPS", "rhs", "rk4_span", "rk4_once", "run_rk4", "rk4_sweep", "warm"]
 
@@ -172,7 +172,7 @@ def rk4_once(scene, horizon: float, steps: int):
     between its command segments in proportion to their length (at least one each). Returns (the Simulator at
     the end, RHS evaluations, steps taken): ``bench.drive_segments``, which normalises q at each command instant
     and at the end."""
-    from gyro_sim.apps.bench import drive_segments
+    from gyro_sim.apps.bench_core import drive_segments
 
     def advance(sim, t_next):
         n = max(1, int(round(steps * (t_next - sim.t) / horizon)))
@@ -196,7 +196,7 @@ def run_rk4(scene_name: str, horizon: float, steps: int, extra: Optional[dict] =
             max_reps: int = 1, label: Optional[str] = None):
     """One timed run of the compiled RK4 baseline (``bench.Row``; knob ``steps`` over the horizon), after
     :func:`warm`; timed like the other methods (``bench._timed``: least CPU of the repeats)."""
-    from gyro_sim.apps.bench import Row, _timed
+    from gyro_sim.apps.bench_core import Row, _timed
 
     warm()
     scene = _load(scene_name, extra)
@@ -243,7 +243,7 @@ def rk4_sweep(scene_name: str, horizon: float, L_ref: np.ndarray, q_ref: np.ndar
 
 def _load(scene_name: str, extra: Optional[dict]):
     """The scene with ``extra`` overrides and no controller (as every work-precision method runs it)."""
-    from gyro_sim.apps.bench import _scene_overrides
+    from gyro_sim.apps.bench_core import _scene_overrides
     from gyro_sim.scenes.scene import load_scene
 
     return load_scene(scene_name, overrides=_scene_overrides("full", extra))

@@ -40,7 +40,7 @@ OUTPUT_RATE_DURATION = {"quick": 2.0, "full": 10.0}  # s of the default scene in
 
 def ticks_part(res, quick: bool) -> None:
     """Fill ``res.ticks`` (dicts: case, run, duration, cpu, wall, steps, ratio, ratio_of)."""
-    from gyro_sim.apps.bench import _say, _timed_warm
+    from gyro_sim.apps.bench_core import _say, _timed_warm
     from gyro_sim.scenes.scene import load_scene
     from gyro_sim.engine.simulate import run
     from gyro_sim.engine.ticks import python_ticks
@@ -82,7 +82,7 @@ def ticks_part(res, quick: bool) -> None:
 def output_rate_part(res, quick: bool) -> None:
     """Fill ``res.output_rates`` (dicts: accuracy, rate, duration, cpu, wall, steps, samples, est_L, est_att, ratio):
     the default scene without controller at each of :data:`OUTPUT_RATES`, its CPU over the 50 Hz run's."""
-    from gyro_sim.apps.bench import _say, _timed_warm
+    from gyro_sim.apps.bench_core import _say, _timed_warm
     from gyro_sim.scenes.scene import load_scene
     from gyro_sim.engine.simulate import run
 
@@ -114,7 +114,7 @@ def output_rate_lines(res) -> list:
     """The output-rate table of bench.md ([] where the part did not run)."""
     if not getattr(res, "output_rates", None):
         return []
-    from gyro_sim.apps.bench import _table
+    from gyro_sim.apps.bench_core import _table
 
     top = [v for v in res.output_rates if v["rate"] == max(OUTPUT_RATES)]
     summary = "; ".join(f"{v['accuracy']}: {v['rate']:g} Hz costs {v['ratio']:.3g}x the 50 Hz run" for v in top)
@@ -143,7 +143,7 @@ def markdown_lines(res) -> list:
     """The per-tick table of bench.md and its summary line ([] where the part did not run)."""
     if not res.ticks:
         return []
-    from gyro_sim.apps.bench import _table
+    from gyro_sim.apps.bench_core import _table
 
     on_off = _ratio(res, CASES[0][0], "controller on, compiled ticks")
     ns = [(v["case"], v["ratio"]) for v in res.ticks if v["case"].startswith("nutation_slow") and v["ratio"]]

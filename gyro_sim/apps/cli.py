@@ -37,6 +37,7 @@ import sys
 from pathlib import Path
 
 from gyro_sim import __version__
+from gyro_sim.apps.console import _write
 
 __all__ = ["main", "build_parser", "format_summary"]
 
@@ -251,15 +252,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # --- output -----------------------------------------------------------------
-
-def _write(stream, text: str) -> None:
-    """Write text, replacing characters the stream's encoding cannot show (θ, ·)."""
-    try:
-        stream.write(text)
-    except UnicodeEncodeError:
-        enc = getattr(stream, "encoding", None) or "ascii"
-        stream.write(text.encode(enc, "replace").decode(enc))
-
 
 def _num(value, fmt: str) -> str:
     if value is None:

@@ -1495,7 +1495,7 @@ def _print_table(rows: list, spec_meta: dict, stream, limit: int = 60) -> None:
 
 
 def _write(stream, text: str) -> None:
-    from gyro_sim.apps.cli import _write as write  # one encoding-safe writer for every command
+    from gyro_sim.apps.console import _write as write  # one encoding-safe writer for every command
 
     write(stream, text)
 

@@ -52,13 +52,12 @@ from gyro_sim.averaging.slow_k import ENTER_MARGIN, MU_MAX, SlowK, slow_k_of
 from gyro_sim.averaging.slow_k import slow_state as slow_k_state
 from gyro_sim.physics.frames import attitude_from_euler, nutation_angle, quat_to_matrix
 from gyro_sim.scenes.scene import Scene, SceneError
-from gyro_sim.engine.simulate import RunResult, Runner
+from gyro_sim.engine.model import AVERAGED_ERROR
+from gyro_sim.engine.result import RunResult
+from gyro_sim.engine.runner import Runner
+from gyro_sim.engine.simulator import Simulator
 
 THETA_MAX = 0.1  # rad
-#: the averaged models' error of L is at most about this times their averaging parameter ε at entry (measured on
-#: the built-in scenes: 0.01 for the spin-up model, 0.04 for [K] on three_stators, 0.4 for [K] ψ-switching on
-#: nutation_slow; docs/benchmark.md): entry needs ε ≤ accuracy.rtol / AVERAGED_ERROR (and ≤ MU_MAX)
-AVERAGED_ERROR = 0.5
 
 
 def mu_max(runner: Runner) -> float:
@@ -124,8 +123,6 @@ class SpinupModel:
 
 def spinup_model(scene: Scene, k: int) -> SpinupModel:
     """The averaged model of stator k of a scene (its present current and rate)."""
-    from gyro_sim.engine.simulate import Simulator
-
     sim = Simulator(scene)
     cond = sim.conductor
     if cond is None:

@@ -36,7 +36,8 @@ from gyro_ctl.laws import CompiledLaw
 from gyro_sim.compiled import frozen_flow, kernels
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.compiled.effects import ON
-from gyro_sim.io.messages import stamp_ns
+from gyro_sim.common.stamps import stamp_ns
+from gyro_sim.engine.model import _tableau
 
 __all__ = ["TickLoop", "tick_loop", "advance", "python_ticks", "MAX_BREAKS"]
 
@@ -204,8 +205,6 @@ def stepper(sim, seg: tuple) -> tuple:
     """(Pf, Pz, Pa): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
     ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow or free, the others None; the
     argument types are advance's (numba compiles no new signature of the stepper)."""
-    from gyro_sim.engine.simulate import _tableau
-
     t_seg, Bre, Bim, om, free, method, h_max = seg
     case = None if sim.attitude else True
     if method == "frozen_flow":

@@ -66,7 +66,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO, Callable, Iterator, Optional, U
 import yaml
 
 from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT, TOPIC_SCENE
-from gyro_sim.io.recording import BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA
+from gyro_sim.io.bag_format import BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA
 
 if TYPE_CHECKING:  # pragma: no cover
     from mcap.records import Chunk, McapRecord

@@ -60,6 +60,8 @@ import math
 from collections.abc import Mapping as _AbcMapping
 from typing import Any, Mapping, Optional, Sequence
 
+from gyro_sim.common.stamps import stamp_ns
+
 __all__ = [
     "NAMESPACE", "FRAME_ROTOR", "FRAME_CASE", "FRAME_L",
     "TOPIC_IMU", "TOPIC_KINETIC_MOMENT", "TOPIC_EULER", "TOPIC_TORQUE", "TOPIC_STATORS",
@@ -146,21 +148,6 @@ _NOT_PROVIDED_COV = [-1.0] + [0.0] * 8  # element 0 = −1: "no estimate of this
 
 
 # --- time -------------------------------------------------------------------------------------
-
-def stamp_ns(t: float) -> int:
-    """Simulation time ``t`` (s, finite, ≥ 0) as integer nanoseconds, rounded to nearest (ties up).
-
-    Exact: computed from the binary value of ``t`` with integers, no floating-point product.
-    """
-    try:
-        t = float(t)
-    except (TypeError, ValueError):
-        raise ValueError(f"time stamp t = {t!r}: must be a number of seconds") from None
-    if not (math.isfinite(t) and t >= 0.0):
-        raise ValueError(f"time stamp t = {t!r}: must be finite and ≥ 0 s")
-    num, den = t.as_integer_ratio()
-    return (2 * num * 1_000_000_000 + den) // (2 * den)
-
 
 def stamp(t: float) -> tuple[int, int]:
     """(sec, nanosec) of ``builtin_interfaces/Time`` for simulation time ``t`` ≥ 0 (s).

@@ -51,6 +51,8 @@ from gyro_sim.io.messages import (
     to_rosbags,
 )
 
+from gyro_sim.io.bag_format import _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA  # noqa: F401  (re-exported)
+
 if TYPE_CHECKING:  # pragma: no cover
     from gyro_sim.engine.simulate import RunResult
 
@@ -58,21 +60,6 @@ __all__ = ["BagRecorder", "BagData", "record_result", "record_run", "stator_fram
            "sigterm_as_interrupt", "check_write_target", "RecordingError", "RunInterrupted", "exit_status",
            "BagNotClosedError", "EARLY_METADATA",
            "BAG_VERSION", "CUSTOM_KEYS"]
-
-BAG_VERSION = 8  # rosbag2 metadata format version: the newest that ROS 2 Humble reads
-_PREFIX = "gyro_sim."
-#: custom_data keys written by the recorder
-CUSTOM_KEYS = {
-    "version": _PREFIX + "version",
-    "scene_name": _PREFIX + "scene_name",
-    "scene": _PREFIX + "scene",
-    "end": _PREFIX + "end",
-}
-
-#: name of the MCAP metadata record the recorder writes at the start of the file with its custom_data (all but
-#: ``gyro_sim.end``): a recording cut short (kill -9, crash) keeps them for ``gyro-sim bag recover``. Not indexed
-#: in the summary (readers of a closed bag see only the ``rosbag2`` record and metadata.yaml).
-EARLY_METADATA = "gyro_sim.custom_data"
 
 _TYPESTORE = None
 

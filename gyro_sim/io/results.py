@@ -1,5 +1,6 @@
-"""A run's results for the scientific Python tools: :class:`~gyro_sim.simulate.RunResult` as a pandas DataFrame or
-an xarray Dataset (units and frames as metadata), its short repr, and a RunResult read back from any recorded bag.
+"""A run's results for the scientific Python tools: :class:`~gyro_sim.engine.result.RunResult` as a pandas DataFrame
+or an xarray Dataset (units and frames as metadata, :mod:`gyro_sim.engine.result`), its short repr, and a RunResult
+read back from any recorded bag (here).
 
 pandas and xarray are the optional extra ``data`` (``pip install 'gyro_sim[data]'``): imported on first use only,
 and where they are missing :class:`MissingExtraError` (an ImportError) says so before any work is done. Units are
@@ -20,190 +21,15 @@ from typing import TYPE_CHECKING, Optional, Union
 
 import numpy as np
 
-from gyro_sim.common.extras import MissingExtra, require
+from gyro_sim.engine.result import (EFFECTS, INSTALL_DATA, SERIES, MissingExtraError, result_repr, to_dataframe,
+                                    to_xarray)
 
 if TYPE_CHECKING:  # pragma: no cover
+    from gyro_sim.engine.result import RunResult
     from gyro_sim.io.recording import BagData
-    from gyro_sim.engine.simulate import RunResult
 
 __all__ = ["to_dataframe", "to_xarray", "result_repr", "read_bag", "result_from_bag", "MissingExtraError",
            "SERIES", "EFFECTS", "INSTALL_DATA"]
-
-INSTALL_DATA = "pip install 'gyro_sim[data]'"
-#: the time series of a RunResult: attribute → (unit, frame, description). The frame of omega_b, spin_rate and
-#: modes is the case frame in a run without attitude (:func:`_frame`).
-SERIES = {
-    "L": ("N m s", "case", "angular momentum L"),
-    "q": ("1", "body to case", "attitude quaternion (w, x, y, z), body to case"),
-    "omega_b": ("rad/s", "body", "angular velocity of the rotor"),
-    "euler": ("rad", "L-frame", "Euler angles psi, theta, phi of the body in the L-frame"),
-    "torque": ("N m", "case", "electrodynamic torque on the rotor"),
-    "energy": ("J", "", "rotational kinetic energy"),
-    "spin_rate": ("rad/s", "body", "spin rate about the polar axis x3 (|Omega| without attitude)"),
-    "current": ("A", "", "stator current amplitude"),
-    "field_rate": ("rad/s", "", "signed rotation rate of the stator's field"),
-    "field_phase": ("rad", "", "phase of the stator's field"),
-    "modes": ("T", "body", "eddy-mode states e_n"),
-}
-#: the outputs of the effects that are on (RunResult.effects; Simulator.effect_outputs): key → (unit, frame, text)
-EFFECTS = {
-    "flywheel_speed": ("rad/s", "", "flywheel speed"),
-    "flywheel_angle": ("rad", "", "flywheel angle"),
-    "damper_offset": ("m", "body", "damper mass offset"),
-    "damper_velocity": ("m/s", "body", "damper mass velocity"),
-    "vertical_angle": ("rad", "", "angle between x3 and the unbalance's vertical"),
-}
-XYZ = ("x", "y", "z")
-WXYZ = ("w", "x", "y", "z")
-ANGLES = ("psi", "theta", "phi")
-
-
-#: an optional dependency of the ``data`` extra (pandas, xarray) is not importable (gyro_sim.extras' one-line error)
-MissingExtraError = MissingExtra
-
-
-def _need(module: str, what: str):
-    """The module ``module`` of the ``data`` extra, imported; else MissingExtraError naming ``what`` needs it
-    (checked before any work: :func:`gyro_sim.extras.require`)."""
-    require("data", what, (module,))
-    import importlib
-
-    return importlib.import_module(module)
-
-
-def _frame(res: "RunResult", name: str) -> str:
-    """The frame of series ``name`` of ``res`` ("" where none): without attitude omega_b and the modes are in the
-    case frame and spin_rate is |Ω| (no frame)."""
-    frame = (SERIES.get(name) or EFFECTS.get(name) or ("", "", ""))[1]
-    if res.attitude or name not in ("omega_b", "modes", "spin_rate"):
-        return frame
-    return "" if name == "spin_rate" else "case"
-
-
-def _run_attrs(res: "RunResult") -> dict:
-    """The run's metadata (netCDF-storable: str, int, float): scene, attitude (1/0), steps, end time (s), and the
-    error estimate (relative error of L, attitude rad, tolerances, met 1/0) where the run has one."""
-    from gyro_sim.engine.simulate import error_summary
-
-    attrs = {"scene": res.scene.name, "attitude": int(bool(res.attitude)), "steps": int(res.steps),
-             "t_end": float(res.t[-1]) if len(res.t) else 0.0}
-    est = res.error_estimate
-    if est is not None:
-        for key, value in error_summary(est).items():
-            attrs[key] = int(value) if isinstance(value, bool) else float(value)
-        attrs["error_estimate"] = est.text()
-    return attrs
-
-
-def _columns(res: "RunResult") -> list:
-    """(column name, values (n,), series) of the DataFrame, in order: vectors ``<series>_<component>``, Euler
-    angles ``psi``/``theta``/``phi``, per stator ``<series>_<stator name>``, then the effects' outputs."""
-    cols = []
-    for name, comps in (("L", XYZ), ("q", WXYZ), ("omega_b", XYZ)):
-        a = getattr(res, name)
-        cols += [(f"{name}_{c}", a[:, i], name) for i, c in enumerate(comps)]
-    eul = res.euler
-    cols += [(c, eul[:, i], "euler") for i, c in enumerate(ANGLES)]
-    cols += [(f"torque_{c}", res.torque[:, i], "torque") for i, c in enumerate(XYZ)]
-    cols += [("energy", res.energy, "energy"), ("spin_rate", res.spin_rate, "spin_rate")]
-    for name in ("current", "field_rate", "field_phase"):
-        a = getattr(res, name)
-        cols += [(f"{name}_{s}", a[:, k], name) for k, s in enumerate(res.stator_names)]
-    for name, a in (res.effects or {}).items():
-        a = np.asarray(a)
-        cols += ([(name, a, name)] if a.ndim == 1 else [(f"{name}_{c}", a[:, i], name) for i, c in enumerate(XYZ)])
-    return cols
-
-
-def to_dataframe(res: "RunResult"):
-    """``res`` as a pandas DataFrame: index ``t`` (s), one float column per component (the arrays' values, not
-    copies of other numbers): ``L_x, L_y, L_z`` (N m s, case frame), ``q_w … q_z`` (body to case), ``omega_b_x …``
-    (rad/s, body frame), ``psi, theta, phi`` (rad, L-frame), ``torque_x …`` (N m, case frame), ``energy`` (J),
-    ``spin_rate`` (rad/s), ``current_<stator>`` (A), ``field_rate_<stator>`` (rad/s), ``field_phase_<stator>`` (rad)
-    and the effects' outputs (``flywheel_speed``, ``damper_offset_x`` …). The eddy modes are left out (see
-    :func:`to_xarray`).
-
-    ``df.attrs``: ``units`` and ``frames`` (column → unit string / frame, "" where none) and the run's metadata
-    (``scene``, ``attitude``, ``steps``, ``t_end``, the error estimate: :func:`to_xarray`)."""
-    pd = _need("pandas", "RunResult.to_dataframe()")
-    cols = _columns(res)
-    index = pd.Index(np.asarray(res.t, dtype=float), name="t")
-    df = pd.DataFrame({name: np.asarray(v, dtype=float) for name, v, _ in cols}, index=index)
-    units = {name: (SERIES.get(s) or EFFECTS.get(s, ("",)))[0] for name, _, s in cols}
-    frames = {name: _frame(res, s) for name, _, s in cols}
-    df.attrs.update(_run_attrs(res), units={"t": "s", **units}, frames=frames)
-    return df
-
-
-def _var(res: "RunResult", name: str, dims: tuple, values):
-    """(dims, values, attrs) of one Dataset variable: units, long name, frame."""
-    unit, _, text = SERIES.get(name) or EFFECTS.get(name, ("", "", name))
-    attrs = {"units": unit, "long_name": text}
-    frame = _frame(res, name)
-    if frame:
-        attrs["frame"] = frame
-    return dims, np.asarray(values, dtype=float), attrs
-
-
-def to_xarray(res: "RunResult"):
-    """``res`` as an xarray Dataset. Dims: ``time`` (s), ``component`` (x, y, z), ``quaternion`` (w, x, y, z),
-    ``angle`` (psi, theta, phi), ``stator`` (the stator names), ``mode`` (1 … N). Variables, each with attrs
-    ``units``, ``long_name`` and ``frame``: L (N m s, case), q (body to case), omega_b (rad/s, body; case without
-    attitude), euler (rad, L-frame), torque (N m, case), energy (J), spin_rate (rad/s), current (A), field_rate
-    (rad/s), field_phase (rad) per stator, modes (T, body; (time, mode, component)), and the effects' outputs.
-
-    Dataset attrs: ``scene`` (name), ``attitude`` (1/0), ``steps``, ``t_end`` (s) and, where the run has an error
-    estimate, ``error_L`` (relative), ``error_attitude`` (rad), ``accuracy_rtol``, ``accuracy_attitude``,
-    ``accuracy_met`` (1/0) and ``error_estimate`` (one line of text)."""
-    xr = _need("xarray", "RunResult.to_xarray()")
-    T = ("time",)
-    n_modes = res.modes.shape[1] // 3
-    data = {
-        "L": _var(res, "L", T + ("component",), res.L),
-        "q": _var(res, "q", T + ("quaternion",), res.q),
-        "omega_b": _var(res, "omega_b", T + ("component",), res.omega_b),
-        "euler": _var(res, "euler", T + ("angle",), res.euler),
-        "torque": _var(res, "torque", T + ("component",), res.torque),
-        "energy": _var(res, "energy", T, res.energy),
-        "spin_rate": _var(res, "spin_rate", T, res.spin_rate),
-        "current": _var(res, "current", T + ("stator",), res.current),
-        "field_rate": _var(res, "field_rate", T + ("stator",), res.field_rate),
-        "field_phase": _var(res, "field_phase", T + ("stator",), res.field_phase),
-        "modes": _var(res, "modes", T + ("mode", "component"), np.asarray(res.modes).reshape(-1, n_modes, 3)),
-    }
-    for name, a in (res.effects or {}).items():
-        a = np.asarray(a)
-        data[name] = _var(res, name, T if a.ndim == 1 else T + ("component",), a)
-    coords = {"time": ("time", np.asarray(res.t, dtype=float), {"units": "s", "long_name": "simulation time"}),
-              "component": list(XYZ), "quaternion": list(WXYZ), "angle": list(ANGLES),
-              "stator": list(res.stator_names), "mode": np.arange(1, n_modes + 1)}
-    return xr.Dataset(data, coords=coords, attrs=_run_attrs(res))
-
-
-# --- repr -----------------------------------------------------------------------------------------------
-
-def result_repr(res: "RunResult") -> str:
-    """A few lines: scene, simulated time, samples, steps, attitude; final spin rate, θ, |L|; the error estimate.
-    A result whose series are still in its bag (:meth:`RunResult.lazy`) is not read: its preview gives the finals."""
-    d = res.__dict__
-    unread = d.get("_load") is not None
-    p = res.preview()
-    n = len(p.t)
-    samples = "samples in its bag (read on first use)" if unread else f"{n} samples"
-    if n == 0:
-        return f"<RunResult {p.scene.name!r}: no samples>"
-    t_end = float(p.t[-1])
-    head = (f"<RunResult {p.scene.name!r}: {t_end:g} s, {samples}, {int(p.steps)} steps, "
-            f"attitude {'yes' if p.attitude else 'no'}")
-    spin = float(p.spin_rate[-1])
-    theta = f"θ {math.degrees(float(p.theta[-1])):.4g}°" if p.attitude else "θ n/a (no attitude)"
-    final = (f" final: spin {spin:.6g} rad/s ({spin / (2 * math.pi):.4g} rev/s), {theta}, "
-             f"|L| {float(np.linalg.norm(p.L[-1])):.6g} N·m·s")
-    est = p.error_estimate
-    err = (" error estimate: " + est.text() + (", met" if est.met else ", NOT met")) if est is not None \
-        else " error estimate: none"
-    return "\n".join((head, final, err)) + ">"
-
 
 # --- a RunResult from a bag --------------------------------------------------------------------------
 

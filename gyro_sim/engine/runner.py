@@ -1,0 +1,411 @@
+"""The :class:`Runner`: a :class:`~gyro_sim.engine.simulator.Simulator` advanced break by break (outputs, commands,
+controller ticks, switching events) with its error control, collecting the samples of a run.
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from gyro_sim.compiled import effects
+from gyro_sim.compiled.compile_watch import CompileClock
+from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times
+from gyro_sim.engine.result import RunResult
+from gyro_sim.engine.simulator import Simulator
+from gyro_sim.common.stamps import stamp_ns
+from gyro_sim.physics.frames import euler_angles, quat_to_matrix
+from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
+from gyro_sim.scenes.scene import Scene, SceneError
+
+
+class Runner:
+    """Advances a :class:`Simulator` break by break over a scene's duration, collecting the outputs.
+
+    Breaks are the output instants (unless ``sample_breaks`` is False), the scene's command instants and
+    the controller ticks. At each
+    break the scene's due commands are applied; at a controller tick the caller supplies the
+    commands (in-process: the law; ROS node: the command message). The sample recorded at time t
+    shows the state at t and the field that acted up to t. Used by :func:`run` and by the
+    simulator node, so both produce the same numbers. ``attitude``: see :func:`integrates_attitude` (the
+    ROS node passes True: it publishes /gyro/imu and /gyro/euler).
+
+    Accuracy (gyro_sim/accuracy.py): the simulator's modes and step knobs are planned for the scene's
+    ``accuracy`` over ``horizon`` s (default: the duration). With ``estimate`` (default) a shadow simulator runs
+    alongside (same commands, same stops, longer steps) and the error control (:class:`gyro_sim.accuracy.
+    ErrorControl`) compares the two at its check instants, which are breaks of every run (so the ROS node and
+    an in-process run decide alike), estimates the error and corrects the step; :meth:`error_estimate` gives the
+    run's estimate. ``estimate=False`` (a run that locates switching events: its bisection re-integrates stretches
+    the shadow cannot follow) runs the plan alone and estimates by the plan's model.
+    """
+
+    def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
+                 attitude: Optional[bool] = None, control_period: Optional[float] = None,
+                 buffer_rows: Optional[int] = None, horizon: Optional[float] = None,
+                 estimate: Optional[bool] = None):
+        T = scene.duration if duration is None else float(duration)
+        if not (math.isfinite(T) and T > 0):
+            raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
+        if control_period is not None and not (math.isfinite(control_period) and control_period > 0):
+            raise SceneError(f"control_period = {control_period}: must be a finite number of seconds > 0")
+        self.scene, self.T = scene, T
+        # the accuracy plan is made for the run's duration (``horizon``: another, e.g. a re-run of an interrupted
+        # bag planned for its whole duration)
+        H = T if horizon is None else float(horizon)
+        self.sim = Simulator(scene, attitude, horizon=H)
+        # the error control and its shadow run (gyro_sim/accuracy.py); checks at fixed fractions of the horizon
+        plan = self.sim.step_plan
+        if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
+            estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
+        self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
+                                    J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound)
+        self.shadow = None
+        if estimate:
+            self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
+            self.shadow.leader = self.sim
+        self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
+        self._ck = 0  # the next check
+        self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
+        self._steps_seen = 0
+        self._impulse = 0.0  # ∫|N| dt over the output samples (N·m·s): the modes' error of L
+        self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
+        self._last_t = 0.0
+        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.Jinv))
+        self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
+        # ticks: the controller's (its period, else one per output sample); control_period sets them for any
+        # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
+        self.period = control_period or controller_period(scene)
+        # every controller tick is an output sample too: the controller (node) sees the published state
+        self.t_out, self._ticks = t_out, ticks = output_times(scene, T, self.period)
+        self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)
+        fly = scene.effects.flywheel  # the kinks of its speed profile are breaks: steps never straddle one
+        knots = {t for t in fly.profile.time if 0 < t < T} if fly is not None else set()
+        # output samples are breaks where a caller acts on each (the ROS node publishes and paces); in-process
+        # they are recorded inside one advance (the same bits: Simulator._segment)
+        # (with an effect on the step plan is made afresh at every advance: the samples stay breaks)
+        if self.sim.eff[effects.ON] != 0.0:
+            sample_breaks = True
+        # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
+        # the breaks of every run, samples or not: where the shadow follows (Runner._follow)
+        self._common = np.unique(np.concatenate([np.array([c.time for c in self._cmds], dtype=float), ticks,
+                                                 np.array([T], dtype=float), np.array(sorted(knots), dtype=float),
+                                                 self._checks]))
+        self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0), self._common]))
+        # output rows held in memory: all of them, or a buffer of ``buffer_rows`` that release() empties (a
+        # streamed run: its rows go to a bag as they come, memory stays flat however long the run)
+        if buffer_rows is not None and buffer_rows < 2:
+            raise ValueError(f"buffer_rows = {buffer_rows}: must be at least 2")
+        n = t_out.size if buffer_rows is None else min(t_out.size, int(buffer_rows))
+        self._base = 0  # the output row (of the whole run) held in buffer row 0
+        k = len(self.sim.stator_names)
+        self.out_y = np.empty((n, self.sim.y.size))
+        self.out_N = np.empty((n, 3))
+        self.cur = np.empty((n, k))
+        self.rate = np.empty((n, k))
+        self.phase = np.empty((n, k))
+        self.row = 0
+        self.command_log: list = []  # every command applied: (t, names, currents|None, rates|None)
+        self._bi = 0  # index of the next break to reach
+        self._ci = 0
+        self.wall_time = 0.0  # s in advance(), numba compile time left out (compile_time)
+        self.compile_time = 0.0
+
+    # --- the loop, one break at a time ---------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return self._bi >= len(self.breaks) and self.row > 0
+
+    @property
+    def is_control_tick(self) -> bool:
+        """Whether the present time is a controller tick (commands are due before advancing)."""
+        t = self.sim.t
+        i = int(np.searchsorted(self._ticks, t))
+        return i < self._ticks.size and self._ticks[i] == t
+
+    def _buf(self, rows: slice) -> slice:
+        """Buffer rows of output rows ``rows`` (of the whole run); refused if :meth:`release` dropped them."""
+        if rows.start < self._base:
+            raise ValueError(f"output rows {rows.start}..{rows.stop}: rows before {self._base} were released")
+        return slice(rows.start - self._base, rows.stop - self._base)
+
+    def release(self) -> None:
+        """Forget the output rows written so far (the caller has taken them): the buffer starts afresh at the
+        present row, and commands logged so far are dropped (:meth:`take_commands` hands them over first)."""
+        self._base = self.row
+        self.command_log.clear()
+
+    def take_commands(self) -> list:
+        """The commands applied since the last call (or the start), ``(t, names, currents|None, rates|None)``."""
+        out, self.command_log[:] = list(self.command_log), []
+        return out
+
+    def apply_scene_commands(self) -> None:
+        """Apply the scene's scheduled commands due at or before the present time."""
+        due: dict = {}
+        while self._ci < len(self._cmds) and self._cmds[self._ci].time <= self.sim.t:
+            c = self._cmds[self._ci]
+            cur, rate = due.get(c.stator, (None, None))
+            due[c.stator] = (c.current if c.current is not None else cur, c.rate if c.rate is not None else rate)
+            self._ci += 1
+        self.apply_commands(due)  # one command message per instant
+
+    def record_initial(self) -> slice:
+        """Record the sample at t = 0 (after the scene's commands of t = 0). Returns its row slice."""
+        self.apply_scene_commands()
+        self.out_y[0], self.out_N[0] = self.sim.y, self.sim.torque()
+        self.cur[0], self.rate[0], self.phase[0] = self.sim.current, self.sim.rate, self.sim.phase
+        self.row = 1
+        if self.breaks.size and self.breaks[0] == 0.0:
+            self._bi = 1
+        return slice(0, 1)
+
+    def control_input(self):
+        """The state a control law sees now (gyro_ctl.laws.ControlInput)."""
+        from gyro_ctl.laws import ControlInput
+
+        sim = self.sim
+        L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
+        if sim.eff[effects.ON] or not sim.attitude:
+            omega_b = sim.body_rates(sim.t, sim.y)[0]
+        else:
+            omega_b = body_rates(sim.J, L, q)[1]
+        if not hasattr(self, "_axes"):
+            self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
+        return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
+
+    def apply_commands(self, commands: dict) -> None:
+        """Apply ``{stator name: (current A, rate rad/s)}`` now (unknown names raise ValueError)."""
+        for name in commands:
+            if name not in self.sim.stator_names:
+                raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
+        self.sim.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+        if self.shadow is not None:
+            self.shadow.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+        if commands:
+            names = list(commands)
+            self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
+
+    def advance(self, until: Optional[float] = None) -> slice:
+        """Integrate to the next break (or to ``until`` if that comes first); returns the output rows written."""
+        if self.row == 0:
+            return self.record_initial()
+        tb = float(self.breaks[self._bi])
+        if until is not None and until < tb:
+            tb = until
+        else:
+            self._bi += 1
+        t_out, row = self.t_out, self.row
+        sel = t_out[row:][t_out[row:] <= tb + 1e-12 * max(1.0, tb)]
+        sim = self.sim
+        t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
+        out = slice(row, row + sel.size)
+        rows = self._buf(out)
+        if rows.stop > self.out_y.shape[0]:
+            raise RuntimeError(f"output buffer of {self.out_y.shape[0]} rows is full: release() the rows taken")
+        with CompileClock() as clock:
+            self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
+            self._accumulate(sel, rows)
+            if self.shadow is not None:
+                self._follow(tb, sel)
+        self.wall_time += clock.wall
+        self.compile_time += clock.compile
+        self.cur[rows] = c0
+        self.rate[rows] = r0
+        self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
+        self.apply_scene_commands()
+        return out
+
+    # --- accuracy: the shadow run, the checks, the estimate ----------------------------------------
+    def _follow(self, tb: float, sel: np.ndarray) -> None:
+        """Advance the shadow to ``tb`` where that is a break of every run (not an output sample made a break:
+        the ROS node's samples are breaks, an in-process run's are not, and the shadow must take the same steps in
+        both); at a check instant compare and maybe change the step."""
+        sim, sh = self.sim, self.shadow
+        j = int(np.searchsorted(self._common, tb))
+        if j < self._common.size and self._common[j] == tb or not (np.searchsorted(self.breaks, tb) < self.breaks.size
+                                                                   and self.breaks[np.searchsorted(self.breaks, tb)] == tb):
+            method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
+            s0 = sh.steps
+            sh.advance(tb)
+            self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
+                                     exact=free and sim._free_axis != -1,
+                                     stiff=h > sim.tau_min)
+            self._steps_seen = sim.steps
+        else:
+            return
+        if self._ck < self._checks.size and tb == self._checks[self._ck]:
+            self._ck += 1
+            # |N| now and its mean since the previous check; whether the shadow's steps were longer there
+            # (from the states at the checks alone: the same in every run, whatever its samples)
+            n_now = float(np.linalg.norm(sim.torque())) if not sim._seg[1][4] else 0.0
+            L0, t0, st0, sst0 = self._at_check
+            n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
+            meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
+            self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
+            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
+            if f is not None:
+                sim.step_div *= f
+            if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
+                sim.replan()
+                sh.replan()
+
+    def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
+        """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate)."""
+        if not sel.size:
+            return
+        r = slice(rows.start, rows.start + sel.size)
+        Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
+        self.control.note_L(float(np.max(Ln)))
+        if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
+            self._last_t = float(sel[-1])
+            return
+        dt = np.diff(np.concatenate([[self._last_t], sel]))
+        N = np.linalg.norm(self.out_N[r], axis=1)
+        om = Ln * float(np.max(self.sim.Jinv))
+        # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
+        self._impulse = float(np.cumsum(np.concatenate([[self._impulse], N * dt]))[-1])
+        self._spin_dev = float(np.cumsum(np.concatenate([[self._spin_dev], np.abs(om - self._om0) * dt]))[-1])
+        self._last_t = float(sel[-1])
+
+    def resync_shadow(self) -> None:
+        """The run's state was set from outside (a fidelity hand-over): keep the errors so far and start the
+        shadow afresh from the run's state."""
+        if self.shadow is None:
+            return
+        sim, sh = self.sim, self.shadow
+        self.control.measure(sim, sh)
+        self.control.bank()
+        sh.y[:] = sim.y
+        sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
+        sh._nu_max = sim._nu_max
+        sh.replan()
+
+    def error_estimate(self) -> ErrorEstimate:
+        """The run's estimated error so far (over the whole duration once it is done): the steps' (from the shadow,
+        else the plan's model), the eddy modes' truncation at the largest slip met, the averaged models' O(ε)."""
+        sim, acc = self.sim, self.scene.accuracy
+        ctl = self.control
+        L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
+        if self.shadow is not None:
+            sL, sq, how = *ctl.measure(sim, self.shadow)[2:], "richardson"
+            # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
+            # closer than the step): the plan's model at the knob they ran
+            for m, k in ctl.weights.items():
+                if not k or k >= R_MEASURABLE * ctl.shadow_steps.get(m, 0):
+                    continue  # (measured)
+                m = "etdrk4" if m == STIFF else m
+                knob = (sim.step_plan.knob(m) / sim.step_div if m in RATE_KNOB
+                        else sim.step_plan.knob(m) * sim.step_div)
+                pL, pq = sim.step_plan.predicted(m, knob)
+                sL, sq, how = sL + pL, sq + pq, "richardson+model"
+        else:
+            used = sorted(getattr(sim, "methods_used", set()) or {"free"})
+            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim._free_axis == -1]
+            sL = max([p[0] for p in pred] + [0.0])
+            sq = max([p[1] for p in pred] + [0.0])
+            how = "model"
+        e_g, e_im = sim.mode_plan.error_at(max(sim.slip_met, 0.0))
+        mL = max(e_g, e_im) * self._impulse / L_max
+        mq = e_im * self._spin_dev
+        aL = 0.0
+        if self.averaged_eps:  # (only a hybrid run has averaged stretches: gyro_sim.fidelity imports SciPy's solvers)
+            aL = AVERAGED_ERROR * max(self.averaged_eps)
+        att = sim.attitude and not self.averaged_eps
+        return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq) if att else math.nan, steps_L=sL,
+                             steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
+                             averaged_L=aL, steps_method=how, rtol=acc.rtol,
+                             atol=math.nan if acc.attitude is None else acc.attitude)
+
+    # --- exact switching instants ------------------------------------------------------------
+    def _snapshot(self) -> tuple:
+        sim = self.sim
+        return (sim.y.copy(), sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy(), sim._nu_max,
+                self.row, self._bi, self._ci, len(self.command_log))
+
+    def _restore(self, snap: tuple) -> None:
+        sim = self.sim
+        sim.y[:], sim.t, sim.phase[:], sim.current[:], sim.rate[:], sim._nu_max = snap[:6]
+        self.row, self._bi, self._ci = snap[6:9]
+        del self.command_log[snap[9]:]
+
+    def advance_located(self, law, switching) -> slice:
+        """:meth:`advance` to the next break, switching the law's commands at the exact zeros of its
+        switching functions in between (bisection to 1e-12 relative in time on re-integrated states).
+
+        ``switching(x)`` returns the law's switching functions; a sign change of a non-zero one is a
+        switch. Integration work of the search counts in ``steps``.
+        """
+        first = self.row
+        for _ in range(10_000):  # a sliding mode would switch without end: then the tick's sampling takes over
+            snap = self._snapshot()
+            s0 = switching(self.control_input())
+            t0 = self.sim.t
+            self.advance()
+            s1 = switching(self.control_input())
+            if not np.any((np.sign(s0) * np.sign(s1)) < 0):
+                return slice(first, self.row)
+            lo_t, hi_t, lo = t0, self.sim.t, snap
+            for _ in range(200):
+                if hi_t - lo_t <= 1e-12 * max(1.0, hi_t):
+                    break
+                mid = 0.5 * (lo_t + hi_t)
+                self._restore(lo)
+                self.sim.advance(mid)
+                s = switching(self.control_input())
+                if np.any((np.sign(s0) * np.sign(s)) < 0):
+                    hi_t = mid
+                else:
+                    lo_t, lo = mid, self._snapshot()
+            self._restore(snap)
+            self.advance(until=hi_t)  # records the samples before the switch
+            # the re-integrated path may end a hair before the zero: step on until the sign has turned,
+            # so the same switch is never found twice
+            dt = 1e-12 * max(1.0, hi_t)
+            while (not np.any(np.sign(s0) * np.sign(switching(self.control_input())) < 0)
+                   and self.sim.t + dt < float(self.breaks[self._bi])):
+                self.advance(until=self.sim.t + dt)
+                dt *= 2.0
+            self.apply_commands(law(self.control_input()))
+        self.advance()  # to the break, sampled
+        return slice(first, self.row)
+
+    def samples(self, rows: slice, euler: bool = True) -> dict:
+        """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current,
+        rate, phase, modes, effects (without attitude: q and euler NaN, omega_b in the case frame). ``rows``: output rows of the
+        whole run (not yet released)."""
+        t_rows, rows = self.t_out[rows], self._buf(rows)
+        L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
+        extra = {}
+        if not self.sim.attitude:
+            omega_b = self.sim.body_rates(t_rows, self.out_y[rows])
+            energy = kinetic_energy(self.sim.J, omega_b)  # isotropic: frame-free
+        elif self.sim.eff[effects.ON]:
+            t = t_rows
+            omega_b = self.sim.body_rates(t, self.out_y[rows])
+            energy = kinetic_energy(self.sim.J, omega_b)  # the rigid body's own
+            extra = self.sim.effect_outputs(t, self.out_y[rows])
+        else:
+            _, omega_b = body_rates(self.sim.J, L, q)
+            energy = kinetic_energy(self.sim.J, omega_b)
+        eul = None
+        if euler:
+            eul = euler_angles(quat_to_matrix(q), L) if self.sim.attitude else np.full((L.shape[0], 3), np.nan)
+        return {"t": t_rows, "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
+                "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
+                "modes": self.out_y[rows, 7:7 + 3 * self.sim.tau.size], "effects": extra}
+
+    def result(self) -> RunResult:
+        """The whole run as a :class:`RunResult` (refused once rows were released: a streamed run's result is read
+        back from its bag)."""
+        if self._base:
+            raise RuntimeError("Runner.result: output rows were released (a streamed run); read its bag back")
+        s = self.samples(slice(0, self.row), euler=False)
+        return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"],
+                         torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
+                         current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
+                         modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
+                         compile_time=self.compile_time,
+                         steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
+                         attitude=self.sim.attitude, error_estimate=self.error_estimate())
+
+

@@ -1,0 +1,107 @@
+"""The layers of gyro_sim (issue 22, docs/architecture.md): the import graph, read from the source (module-level and
+function-level imports alike), has no circle and no edge from a layer to one above it."""
+import ast
+from pathlib import Path
+
+import pytest
+
+import gyro_sim
+
+PKG = Path(gyro_sim.__file__).parent
+
+#: the layers, bottom first: a module may import its own layer and those before it in this list (the one place
+#: the order is declared; each folder's __init__ says the same in words)
+LAYERS = ("common", "physics", "compiled", "scenes", "averaging", "engine", "io", "ros", "apps")
+
+
+def module_files() -> dict:
+    """{dotted name: path} of every module of gyro_sim."""
+    out = {}
+    for path in sorted(PKG.rglob("*.py")):
+        parts = ("gyro_sim",) + path.relative_to(PKG).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def imports(name: str, path: Path, modules: dict) -> dict:
+    """{imported gyro_sim module: first line number} of module ``name`` (``from X import y`` counts as an import
+    of X.y where that is a module, else of X)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = {}
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        targets = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in modules else mod for a in node.names]
+        for t in targets:
+            while t and t not in modules:  # `import gyro_sim.io.recording.x`: the module part
+                t = t.rpartition(".")[0]
+            if t and t != name and t != "gyro_sim" and not name.startswith(t + "."):
+                found.setdefault(t, node.lineno)
+    return found
+
+
+def layer_of(name: str):
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in LAYERS else None
+
+
+MODULES = module_files()
+GRAPH = {name: imports(name, path, MODULES) for name, path in MODULES.items()}
+
+
+def test_every_module_is_in_a_layer():
+    loose = [n for n in MODULES if n != "gyro_sim" and layer_of(n) is None]
+    assert not loose, f"modules outside the layer folders {LAYERS}: {loose}"
+    assert sorted({layer_of(n) for n in MODULES if n != "gyro_sim"}) == sorted(LAYERS)
+
+
+def test_no_upward_edge():
+    rank = {layer: i for i, layer in enumerate(LAYERS)}
+    up = [f"{a} (layer {layer_of(a)}, line {line}) imports {b} (layer {layer_of(b)})"
+          for a, deps in GRAPH.items() if a != "gyro_sim" for b, line in deps.items()
+          if rank[layer_of(b)] > rank[layer_of(a)]]
+    assert not up, "imports that go up a layer:\n  " + "\n  ".join(up)
+
+
+def test_no_import_circle():
+    """Depth-first search over the graph; any back edge closes a circle (named in full)."""
+    state, stack, circles = {}, [], []
+
+    def visit(n):
+        state[n] = "open"
+        stack.append(n)
+        for m in sorted(GRAPH[n]):
+            if state.get(m) == "open":
+                circles.append(" -> ".join(stack[stack.index(m):] + [m]))
+            elif m not in state:
+                visit(m)
+        stack.pop()
+        state[n] = "done"
+
+    for n in sorted(GRAPH):
+        if n not in state:
+            visit(n)
+    assert not circles, "import circles:\n  " + "\n  ".join(circles)
+
+
+def test_root_imports_nothing_at_import():
+    """gyro_sim/__init__ loads its public names on first use only (a layer above everything, imported by all)."""
+    tree = ast.parse((PKG / "__init__.py").read_text(encoding="utf-8"))
+    top = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+    assert all(isinstance(n, ast.Import) and all(not a.name.startswith("gyro_sim") for a in n.names) for n in top)
+
+
+@pytest.mark.parametrize("old", sorted(gyro_sim.MOVED))
+def test_old_paths_are_the_new_modules(old):
+    import importlib
+
+    assert importlib.import_module(f"gyro_sim.{old}") is importlib.import_module(f"gyro_sim.{gyro_sim.MOVED[old]}")
