@@ -67,10 +67,12 @@ class _OldPaths(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         return importlib.util.spec_from_loader(name, self)
 
     def create_module(self, spec):
-        return importlib.import_module(self._home(spec.name))
+        module = importlib.import_module(self._home(spec.name))
+        self._spec = module.__spec__  # (the import machinery sets __spec__ to the alias's: put back in exec_module)
+        return module
 
     def exec_module(self, module):
-        pass  # (the home module ran when create_module imported it)
+        module.__spec__ = self._spec  # (the home module ran when create_module imported it)
 
     def get_code(self, name):  # runpy: python -m gyro_sim.<old>
         home = self._home(name)

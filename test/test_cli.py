@@ -7,6 +7,7 @@ with any implementation of that interface.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import math
 import re
 import subprocess
@@ -127,7 +128,8 @@ def fakes(monkeypatch, tmp_path):
     sim_mod.run = run
     for mod in (scene_mod, sim_mod):
         monkeypatch.setitem(sys.modules, mod.__name__, mod)
-        monkeypatch.setattr(gyro_sim, mod.__name__.rsplit(".", 1)[1], mod, raising=False)
+        parent, _, child = mod.__name__.rpartition(".")
+        monkeypatch.setattr(importlib.import_module(parent), child, mod, raising=False)
     return calls
 
 

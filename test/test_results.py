@@ -168,7 +168,9 @@ def test_missing_extra_says_which_before_any_work(res, monkeypatch, method, modu
     def no_work(*a, **k):
         raise AssertionError("work done before the missing extra was reported")
 
-    monkeypatch.setattr(results, work, no_work)
+    from gyro_sim.engine import result  # (the views' home; gyro_sim.results re-exports them)
+
+    monkeypatch.setattr(result, work, no_work)
     with pytest.raises(ImportError) as exc:
         getattr(res, method)()
     assert isinstance(exc.value, results.MissingExtraError)
