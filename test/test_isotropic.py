@@ -164,7 +164,9 @@ def test_ros_node_runner_keeps_the_attitude():
 
     from gyro_sim import rerun
     assert "attitude=True" in inspect.getsource(rerun.rerun_bag)
-    node = (Path(rerun.__file__).parent / "ros" / "simulator_node.py").read_text()
+    import gyro_sim
+
+    node = (Path(gyro_sim.__file__).parent / "ros" / "simulator_node.py").read_text()
     assert "Runner(node.scene, self.p[\"duration\"] or None, attitude=True," in node
 
 
