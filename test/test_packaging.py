@@ -325,6 +325,7 @@ PIP_KEYS = {
     "mcap-ros2-support": "mcap-ros2-support", "dask": None, "pyarrow": None, "tqdm": "python3-tqdm",
     "pandas": "python3-pandas", "xarray": None,
     "websockets": "python3-websockets", "foxglove-sdk": None,
+    "ruff": None, "mypy": "python3-mypy",
 }
 #: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
 #: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed
