@@ -30,6 +30,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
+    # PEP 561 markers: the packages' annotations are for their users' type checkers too
+    package_data={'gyro_sim': ['py.typed'], 'gyro_ctl': ['py.typed']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name, 'resource/gyro_ctl']),
         # `ros2 run gyro_sim simulator` and `ros2 run gyro_ctl controller` (gyro_ctl is indexed as a
@@ -80,6 +82,10 @@ setup(
             'colcon-python-setup-py>=0.2.9',
             'colcon-package-information>=0.4',  # `colcon list`
             'websockets>=15',  # the test client of the live view (Foxglove WebSocket protocol; proxy=None needs 15)
+            # lint and types in CI (test/test_lint.py against test/lint_baseline.json; config in pyproject.toml).
+            # The findings depend on the versions: the baseline was made with ruff 0.17 and mypy 2.4.
+            'ruff>=0.17',
+            'mypy>=2.4',
         ],
         # RunResult.to_dataframe() / to_xarray() (gyro_sim/results.py)
         'data': [
@@ -110,6 +116,7 @@ setup(
     long_description=_read('README.md'),
     long_description_content_type='text/markdown',
     license='Apache-2.0',
+    license_files=['LICENSE'],
     entry_points={
         'console_scripts': [
             'gyro-sim = gyro_sim.apps.cli:main',

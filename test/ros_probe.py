@@ -169,7 +169,7 @@ def script(out: str, ns: str, seconds: float, steps: list) -> None:
             res = {"step": step}
             if "wait_status" in step:
                 k = step.get("count", 1)
-                spin_until(lambda: sum(step["wait_status"] in x for x in seen["status"]) >= k)
+                spin_until(lambda step=step, k=k: sum(step["wait_status"] in x for x in seen["status"]) >= k)
             elif "call" in step:
                 r = _call(node, node.create_client(Trigger, f"gyro/{step['call']}"), Trigger.Request())
                 res.update(success=r.success, message=r.message)
@@ -183,7 +183,7 @@ def script(out: str, ns: str, seconds: float, steps: list) -> None:
                 res["results"] = [[x.successful, x.reason] for x in r.results]
             elif "sleep" in step:
                 t1 = time.time() + step["sleep"]
-                spin_until(lambda: time.time() > t1)
+                spin_until(lambda t1=t1: time.time() > t1)
             rclpy.spin_once(node, timeout_sec=0.0)
             res["clock"] = seen["clock"][-1] if seen["clock"] else None
             results.append(res)

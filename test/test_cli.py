@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import gyro_sim
 from gyro_sim import cli, plotting
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

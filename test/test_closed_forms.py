@@ -212,7 +212,7 @@ def test_euler_angles_round_trip():
     ey3 = np.abs(Y[:, :, 2] - L / Lm[:, None]).max()
     print(f"\n  euler_angles round trip: angle error {err:.2e}, L_b error {eLb:.2e}, Y orthogonality {eY:.2e}")
     assert err < 1e-10 and eLb < 1e-13 and eY < 1e-14 and ey3 < 1e-14
-    assert np.allclose(det := np.linalg.det(Y), 1.0)
+    assert np.allclose(np.linalg.det(Y), 1.0)
 
 
 # ----------------------------------------------------------------------------------
@@ -249,7 +249,7 @@ def test_torque_slip_vs_time_domain_filter():
     worst = 0.0
     for s in (-900.0, -50.0, 10.0, 1 / tau, 2000.0):
         # body frame: field rotates at the slip s; w = m + K B_b obeys dw/dt = (K B_b − w)/τ
-        def Bb(t):
+        def Bb(t, s=s):
             return B0 * np.array([np.cos(s * t), np.sin(s * t), 0.0])
 
         T = 40 * tau + 2 * np.pi / abs(s)
@@ -299,7 +299,10 @@ def test_window_roots_vs_averaged_linear_response():
     """The sign changes of the averaged dθ/dt (torus average of the exact linear response at
     θ = 1e-4) are the roots J1 l_{1,2} of [M] (3.20); (3.18) matches the rate to O(θ²)."""
     win = thin_shell_nutation_window(J1, J3, TAU, OMEGA)
-    f = lambda Lm: averaged_nutation_rate(g_shell, R2, 1.0, J1, J3, Lm, OMEGA, 1e-4)
+
+    def f(Lm):
+        return averaged_nutation_rate(g_shell, R2, 1.0, J1, J3, Lm, OMEGA, 1e-4)
+
     r1 = brentq(f, 0.5, 4.4, xtol=1e-14)
     r2 = brentq(f, 4.6, 9.0, xtol=1e-14)
     e_roots = max(abs(r1 - win.L_low), abs(r2 - win.L_high)) / win.L_high

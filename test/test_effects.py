@@ -79,7 +79,7 @@ def test_effect_states_are_recorded_and_read_back_independently(tmp_path):
     (mcap_file,) = bag.glob("*.mcap")
     rows = []
     with open(mcap_file, "rb") as f:
-        for _, ch, _, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+        for _, _ch, _, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
                 topics=["/gyro/effects"]):
             rows.append((list(msg.name), list(msg.position), list(msg.velocity)))
     assert len(rows) == len(r.t)

@@ -422,7 +422,7 @@ def _check_documents(doc, text, blob, tally: Counter) -> None:
     assert as_dump == as_dict, dumped
     tally["dump " + as_dump] += 1
     for pure in (False, True):
-        tally["text " + _outcome(lambda: scene_from_dict(parse_scene_text(text, "fuzz.yaml", pure=pure),
+        tally["text " + _outcome(lambda pure=pure: scene_from_dict(parse_scene_text(text, "fuzz.yaml", pure=pure),
                                                           where="fuzz.yaml"))] += 1
     tally["bytes " + _outcome(lambda: scene_from_dict(parse_scene_text(blob, "fuzz.yaml"), where="fuzz.yaml"))] += 1
 

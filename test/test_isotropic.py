@@ -188,7 +188,7 @@ def test_no_attitude_work_makes_the_step_cheaper():
         stops, rec = np.array([2.0]), np.array([False])
         oy, oN = np.zeros((1, sim.y.size)), np.zeros((1, 3))
 
-        def go():
+        def go(sim=sim, t_seg=t_seg, stops=stops, rec=rec, h=h, Bre=Bre, Bim=Bim, om=om, oy=oy, oN=oN):
             y = sim.y.copy()
             return frozen_flow.integrate_frozen(y, 0.0, t_seg, stops, rec, h, Bre, Bim, om, sim.Jinv, J, J, 2,
                                                 sim.c_m, sim.w, sim.tail, 1.0 / sim.tau, oy, oN, 0, sim.eff,

@@ -227,7 +227,7 @@ def test_theorem2_criterion_equals_the_linearisation():
         i, j = (k + 1) % 3, (k + 2) % 3
         A_lin = mg.stationary_linearization(J_T2, M_T2, P1_T2, OM_T2, B_T2, k)
 
-        def f(x):
+        def f(x, i=i, j=j, k=k):
             Om = np.zeros(3)
             b = np.zeros(3)
             Om[[i, j]], b[[i, j]] = x[0:2], x[2:4]

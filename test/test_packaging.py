@@ -24,7 +24,8 @@ from packaging.requirements import Requirement
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 COPY_IGNORE = shutil.ignore_patterns(".git", ".venv", "build", "install", "log", "runs", "__pycache__", "*.egg-info",
-                                     ".hypothesis", ".pytest_cache", ".benchmarks", "*.nbi", "*.nbc")
+                                     ".hypothesis", ".pytest_cache", ".benchmarks", "*.nbi", "*.nbc",
+                                     ".mypy_cache", ".ruff_cache")
 # what setup.py's data_files install (checked in a colcon install and in a ros-index prefix)
 INDEX = "share/ament_index/resource_index/packages/"
 DATA_FILES = [INDEX + "gyro_sim", INDEX + "gyro_ctl",
@@ -325,6 +326,7 @@ PIP_KEYS = {
     "mcap-ros2-support": "mcap-ros2-support", "dask": None, "pyarrow": None, "tqdm": "python3-tqdm",
     "pandas": "python3-pandas", "xarray": None,
     "websockets": "python3-websockets", "foxglove-sdk": None,
+    "ruff": None, "mypy": "python3-mypy",
 }
 #: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
 #: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed

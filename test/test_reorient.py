@@ -145,7 +145,8 @@ def test_program_holds_the_other_components_and_arrives_in_time():
         scale = float(np.max(seg.c * np.abs(seg.rates)))
         q, r = (p + 1) % 3, (p + 2) % 3
         worst_hold = max(worst_hold, abs(rhs[q]) / scale, abs(rhs[r]) / scale)
-        sol = solve_ivp(lambda t, y: averaged_rate(y, seg.c, seg.rates, J, gamma), (0, T), L, rtol=1e-12, atol=1e-18)
+        sol = solve_ivp(lambda t, y, seg=seg, J=J, gamma=gamma: averaged_rate(y, seg.c, seg.rates, J, gamma), (0, T), L,
+                        rtol=1e-12, atol=1e-18)
         end = sol.y[:, -1]
         worst_end = max(worst_end, abs(end[p] - target) / abs(target - L[p]))
         worst_q = max(worst_q, abs(end[q] - L[q]) / np.linalg.norm(L), abs(end[r] - L[r]) / np.linalg.norm(L))
@@ -343,7 +344,7 @@ def test_error_shrinks_with_mu():
                            start=0.25, **scene_constants(s0))
         segs = plan(p, [0.0, 0.0, L3s], theta=0.01)
         mu = small_parameter(p, segs, L3s)
-        res = drive(with_controller(d, p, 0.01), lambda x: reorient(x, p))
+        res = drive(with_controller(d, p, 0.01), lambda x, p=p: reorient(x, p))
         target = np.array([0.25 * L3s, -0.2 * L3s, L3s])
         err = float(np.linalg.norm(res.L[-1] - target)) / L3s
         print(f"\nspin {spin} rad/s: μ = {mu:.2e}, final error {err:.2e} |L| = {err / mu:.2f} μ|L|")
@@ -380,7 +381,7 @@ def test_config_scene_reorient_L():
     nominal = L0.copy()
     mu = small_parameter(p, segs, float(np.linalg.norm(L0)))
     print(f"\nreorient_L ({'registered law' if registered else 'law driven directly'}): μ = {mu:.2e}")
-    for (t0, t1), w in zip(p.schedule(), p.waypoints):
+    for (_t0, t1), w in zip(p.schedule(), p.waypoints):
         nominal[p.stator_names.index(w.axis)] = w.target
         err = float(np.linalg.norm(value_at(res, t1) - nominal))
         print(f"  waypoint {w.axis} → {w.target:.3e}: error {err:.2e} N·m·s = {err / (mu * np.linalg.norm(L0)):.2f} μ|L|")

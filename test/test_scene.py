@@ -1,5 +1,4 @@
 """Scene loading: built-in scenes validate; a wrong scene is refused with one clear message."""
-import copy
 import math
 
 import numpy as np

@@ -35,6 +35,7 @@ import math
 import sys
 import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -199,7 +200,7 @@ def realtime_factor(res: Results) -> None:
         try:
             scene = load_scene(cfg.rtf_scene, overrides=None if level == "full" else {"fidelity": level})
             T = cfg.rtf_duration or scene.duration
-            wall, cpu, r = _timed(lambda: run(scene, duration=T), 0.0, 1)
+            wall, cpu, r = _timed(partial(run, scene, duration=T), 0.0, 1)
         except Exception as exc:
             res.notes.append(f"real-time factor: {_method_label(level)} skipped: {exc}".splitlines()[0])
             _say(f"[real time] {_method_label(level)}: skipped ({str(exc).splitlines()[0]})")
@@ -220,7 +221,7 @@ def realtime_factor(res: Results) -> None:
 #: the 20-minute spin-up's accuracies: (label, scene overrides). Its goal is L (the attitude of a rotor turned
 #: through 2·10⁶ rad cannot be held to 1e-6 rad: the plan's floor is 1e-12 of the phase, docs/accuracy.md), so the
 #: rows that time it hold L alone; the scene's own accuracy (attitude 1e-6 rad) is a row of its own
-SPINUP_RUNS = (
+SPINUP_RUNS: tuple = (
     ("rtol 1e-6, attitude: null", {"accuracy": {"rtol": 1e-6, "attitude": None}}),
     ("rtol 1e-6, attitude: null, output 1 Hz", {"accuracy": {"rtol": 1e-6, "attitude": None}, "output.rate": 1.0}),
     ("as shipped: rtol 1e-6, attitude 1e-6 rad", {}),
@@ -261,7 +262,7 @@ def long_spinup(res: Results) -> None:
         try:
             sc = load_scene("spinup_thin_shell", overrides=ov)
             run(sc, duration=1.0)  # (compiles or loads what it needs before the clock runs)
-            w, c, r = _timed(lambda: run(sc), 0.0, 1)
+            w, c, r = _timed(partial(run, sc), 0.0, 1)
         except Exception as exc:  # a level that does not apply
             res.notes.append(f"spin-up: {method} skipped: {exc}".splitlines()[0])
             _say(f"[spin-up {T:g} s] {method}: skipped ({str(exc).splitlines()[0]})")
@@ -288,8 +289,8 @@ def averaged_models(res: Results) -> None:
         sa = sc.model_copy(update={"fidelity": "auto"})
         for warm in (sc, sa):  # compile what this scene's types need before the clock runs
             run(warm, duration=min(sc.duration, 2.0 / sc.output.rate))
-        wf, cf, f = _timed(lambda: run(sc), cfg.min_wall, cfg.max_reps)
-        wa, ca, a = _timed(lambda: run(sa), cfg.min_wall, cfg.max_reps)
+        wf, cf, f = _timed(partial(run, sc), cfg.min_wall, cfg.max_reps)
+        wa, ca, a = _timed(partial(run, sa), cfg.min_wall, cfg.max_reps)
         e = {"scene": name, "duration": sc.duration, "models": ", ".join(sorted(set(a.averaged_models))) or "none",
              "averaged": _averaged_time(a), "wall_full": wf, "wall_auto": wa, "cpu_full": cf, "cpu_auto": ca,
              "speedup": cf / ca, "wall_speedup": wf / wa, "error_L": final_error(a.L[-1], None, f.L[-1], None),
@@ -301,7 +302,7 @@ def averaged_models(res: Results) -> None:
              f"θ {e['error_theta']:.1e} rad")
 
 
-SAVINGS = (
+SAVINGS: tuple = (
     # (what the scene skips, overrides of the scene that skips it, the overrides that make it do that work,
     #  what the comparison is)
     ("stators that are off", {}, {"stators.0.current": 1e-15, "stators.1.current": 1e-15},
@@ -340,7 +341,7 @@ def savings(res: Results) -> None:
         rows = []
         for ov in (base, {**base, **forced}):
             sc = load_scene("spinup_thin_shell", overrides=ov)
-            w, c, r, comp = _timed_warm(lambda: run(sc, duration=T), cfg.min_wall, cfg.max_reps)
+            w, c, r, comp = _timed_warm(partial(run, sc, duration=T), cfg.min_wall, cfg.max_reps)
             rows.append((c, int(r.steps), Simulator(sc)._method(), comp))
         (c0, n0, m0, k0), (c1, n1, m1, k1) = rows
         res.savings.append({"what": what, "how": how, "horizon": T, "cpu": c0, "cpu_forced": c1, "steps": n0,
@@ -384,14 +385,14 @@ def profile_kernels(res: Results) -> None:
         loop_rhs(10, *args)
         loop_field(10, Bre, Bim, om, work[0:3], work[3:6])
         n = 500_000
-        t_rhs = min(_once(lambda: loop_rhs(n, *args)) for _ in range(3)) / n
-        t_field = min(_once(lambda: loop_field(n, Bre, Bim, om, work[0:3], work[3:6])) for _ in range(3)) / n
+        t_rhs = min(_once(partial(loop_rhs, n, *args)) for _ in range(3)) / n
+        t_field = min(_once(partial(loop_field, n, Bre, Bim, om, work[0:3], work[3:6])) for _ in range(3)) / n
         h = sim._max_step(False, "etdrk4")
         k = 200_000
         stops, rec = np.array([k * h]), np.array([False])
         oy, oN = np.zeros((1, y.size)), np.zeros((1, 3))
 
-        def integ():
+        def integ(sim=sim, stops=stops, rec=rec, h=h, Bre=Bre, Bim=Bim, om=om, oy=oy, oN=oN):  # (bound now: B023)
             yy = sim.y.copy()
             return kernels.integrate_etd(yy, 0.0, 0.0, stops, rec, h, Bre, Bim, om, sim.Jinv, sim.c_m, sim.w,
                                          sim.tail, sim.lam, oy, oN, 0, sim.eff)
@@ -402,7 +403,7 @@ def profile_kernels(res: Results) -> None:
         t_rk4 = _rk4_step_cost(sim)
         f = numpy_rhs(sim)
         m = 2000
-        t_np = min(_once(lambda: [f(1e-3, y) for _ in range(m)]) for _ in range(3)) / m
+        t_np = min(_once(lambda f=f, y=y, m=m: [f(1e-3, y) for _ in range(m)]) for _ in range(3)) / m
         for what, sec in (("RHS, compiled (nonlinear_part_at)", t_rhs), ("field B, dB/dt (field_case)", t_field),
                           ("ETDRK4 step (integrate_etd)", t_step), ("frozen_flow step (integrate_frozen)", t_ff),
                           ("RK4 step, compiled baseline (bench_baseline.rk4_span, 4 RHS)", t_rk4),

@@ -140,7 +140,7 @@ def reference(name: str, T: float) -> tuple[object, dict]:
     # doubled until two agree to REF_TARGET (at most REF_DOUBLINGS times): the finer is the reference, their
     # difference (the coarser's error) bounds its own
     coarse, cpu = go(spt)
-    for k in range(REF_DOUBLINGS):
+    for _ in range(REF_DOUBLINGS):
         spt *= 2
         ref, c = go(spt)
         cpu += c
@@ -264,7 +264,7 @@ def csv_rows(acc: AccResults) -> list[dict]:
 def headline(acc: AccResults) -> list[str]:
     """One line per scene as shipped (full fidelity): achieved against stated, and the cost against the old defaults."""
     lines = []
-    by = {}
+    by: dict = {}
     for r in acc.rows:
         by.setdefault(r.scene, {})[(r.what, r.fidelity)] = r
     for name, d in by.items():

@@ -21,12 +21,13 @@ dense output).
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import Optional
 
 __all__ = ["ticks_part", "output_rate_part", "markdown_lines"]
 
 #: (case, scene, overrides, duration s (None: the scene's), in quick mode too, the comparison without controller)
-CASES = (
+CASES: tuple = (
     ("default scene as shipped", "spinup_thin_shell", {}, None, True, True),
     ("default scene, accuracy of L alone", "spinup_thin_shell", {"accuracy": {"attitude": None}}, None, True, True),
     ("nutation_slow, fidelity auto, rtol 2e-3", "nutation_slow", {"fidelity": "auto", "accuracy.rtol": 2e-3}, None,
@@ -51,9 +52,10 @@ def ticks_part(res, quick: bool) -> None:
             continue
         scene = load_scene(name, overrides=ov)
         T = T or (QUICK_DEFAULT_DURATION if quick and name == "spinup_thin_shell" else scene.duration)
-        runs = {}
+        runs: dict = {}
 
-        def timed(label: str, sc, python: bool = False) -> None:
+        # (called within the iteration; case, T and runs bound as defaults all the same: B023)
+        def timed(label: str, sc, python: bool = False, case=case, T=T, runs=runs) -> None:
             def go():
                 if python:
                     with python_ticks():
@@ -93,7 +95,7 @@ def output_rate_part(res, quick: bool) -> None:
         rows = []
         for rate in OUTPUT_RATES:
             scene = load_scene("spinup_thin_shell", overrides={"controller": None, "output.rate": rate, **ov})
-            wall, cpu, r, _ = _timed_warm(lambda: run(scene, duration=T), cfg.min_wall, cfg.max_reps)
+            wall, cpu, r, _ = _timed_warm(partial(run, scene, duration=T), cfg.min_wall, cfg.max_reps)
             est = r.error_estimate
             rows.append({"accuracy": acc, "rate": rate, "duration": T, "cpu": cpu, "wall": wall, "steps": int(r.steps),
                          "samples": int(r.t.size), "est_L": est.L if est else None,

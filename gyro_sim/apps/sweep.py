@@ -77,7 +77,9 @@ class SweepError(ValueError):
 # ------------------------------------------------------------------------------------------
 def _split_top(text: str, sep: str) -> list[str]:
     """Split at ``sep`` outside brackets/parentheses."""
-    out, depth, cur = [], 0, []
+    out: list[str] = []
+    cur: list[str] = []
+    depth = 0
     for ch in text:
         if ch in "[(":
             depth += 1
@@ -568,7 +570,7 @@ class SweepSpec:
     def variants(self) -> list:
         grid = list(itertools.product(*[a.values for a in self.grid])) if self.grid else [()]
         samples = list(range(self.samples)) if self.random else [None]
-        out = []
+        out: list = []
         for combo in grid:
             for s in samples:
                 values = {a.key: _plain(v) for a, v in zip(self.grid, combo)}

@@ -569,7 +569,7 @@ class GyroBench:
         """A spawned controller that exited with an error while the simulator runs: the run cannot go on well."""
         if not self._session.get("fail_fast"):
             return
-        for name, p, log, argv in self._spawned:
+        for name, p, _log, _argv in self._spawned:
             code = p.poll()
             if code not in (None, 0):
                 self._session["fatal"] = ("exited", f"{name} exited with status {code}")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from typing import Callable, Optional, TextIO
+from typing import Callable, Literal, Optional, TextIO
 
 __all__ = ["compile_seconds", "announce_compiles", "CompileClock"]
 
@@ -81,7 +81,7 @@ class CompileClock:
         self._w0, self._c0 = time.perf_counter(), _state["total"]
         return self
 
-    def __exit__(self, *exc) -> bool:
+    def __exit__(self, *exc) -> Literal[False]:
         c = _state["total"] - self._c0
         self.compile += c
         self.wall += time.perf_counter() - self._w0 - c

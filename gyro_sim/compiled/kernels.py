@@ -665,35 +665,16 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
 # Lawson (integrating-factor) explicit Runge–Kutta with the attitude on the rotation group
 
 
-def _dop853_coefficients():
-    """SciPy's module of the DOP853 table (``scipy.integrate._ivp.dop853_coefficients``: NumPy arrays only), read
-    from its file without importing ``scipy.integrate`` (solve_ivp, QUADPACK, ODEPACK: 0.1–0.2 s of a process's
-    start-up); imported the usual way where SciPy's layout differs."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    name = "scipy.integrate._ivp.dop853_coefficients"
-    if name in sys.modules:
-        return sys.modules[name]
-    scipy_spec = importlib.util.find_spec("scipy")
-    path = Path(scipy_spec.origin).parent / "integrate" / "_ivp" / "dop853_coefficients.py" if scipy_spec else None
-    if path is not None and path.is_file():
-        spec = importlib.util.spec_from_file_location("gyro_sim._dop853_coefficients", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        return module
-    import importlib
-
-    return importlib.import_module(name)
-
-
 def dop853_tableau() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(A, b, c) of the 12-stage, 8th-order Dormand–Prince method (Hairer, Nørsett & Wanner; SciPy's table)."""
-    d = _dop853_coefficients()
+    """(A, b, c) of the 12-stage, 8th-order Dormand–Prince method (Hairer, Nørsett & Wanner; the coefficients of
+    SciPy's DOP853, kept in :mod:`gyro_sim.compiled.dop853_coefficients`)."""
+    from . import dop853_coefficients as d
+
     s = d.N_STAGES
-    return (np.ascontiguousarray(d.A[:s, :s], dtype=float), np.ascontiguousarray(d.B, dtype=float),
-            np.ascontiguousarray(d.C[:s], dtype=float))
+    A = np.zeros((s, s))
+    for i, row in enumerate(d.A_ROWS):
+        A[i, :i] = row
+    return A, np.array(d.B, dtype=float), np.array(d.C, dtype=float)
 
 
 @njit(cache=True)

@@ -158,13 +158,13 @@ def averaged_region(runner: Runner) -> tuple[Optional[int], str]:
     if scene.effects.any:
         on = [k for k in type(scene.effects).model_fields if getattr(scene.effects, k) is not None]
         return None, f"effects {on} are on; the averaged model has none of them"
-    on = [k for k in range(len(sim.stator_names)) if sim.current[k] > 0]
-    if len(on) != 1:
-        return None, f"{len(on)} stators on; the averaged model takes exactly one"
+    lit = [k for k in range(len(sim.stator_names)) if sim.current[k] > 0]
+    if len(lit) != 1:
+        return None, f"{len(lit)} stators on; the averaged model takes exactly one"
     ctl = scene.controller
     if ctl is not None and not (ctl.law == "spinup" and ctl.params.ramp is None):
         return None, f"controller law {ctl.law!r} is not a constant command"
-    k = on[0]
+    k = lit[0]
     u = sim.axes[k]
     L = sim.y[0:3]
     Ln = math.sqrt(float(L @ L))
@@ -252,7 +252,7 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optiona
     strict = scene.fidelity == "averaged"
     w0, c0 = time.perf_counter(), compile_seconds()
     cmd_times = sorted({c.time for c in scene.commands if c.time < r.T})
-    segments = []  # (t0, t1) of averaged stretches
+    segments: list = []  # (t0, t1) of averaged stretches
     models = []  # the averaged model of each stretch: "spin-up", "[M]", "[K]"
     nfev = 0
     next_test, tested_cmd = -math.inf, None

@@ -361,7 +361,7 @@ _OCTETS: dict[type, frozenset] = {}  # message class → its octet fields (rclpy
 def _octets(cls: type) -> frozenset:
     hit = _OCTETS.get(cls)
     if hit is None:
-        types = getattr(cls, "get_fields_and_field_types", dict)()
+        types: dict = getattr(cls, "get_fields_and_field_types", dict)()
         hit = _OCTETS[cls] = frozenset(k for k, v in types.items() if v == "octet")
     return hit
 

@@ -38,7 +38,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Mapping, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Iterator, Literal, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import yaml
@@ -469,7 +469,7 @@ class BagRecorder:
     def __enter__(self) -> "BagRecorder":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         if isinstance(exc, RunInterrupted):  # (the words the simulator node uses too)
             self._end = f"interrupted: signal {signal.Signals(exc.signum).name}"
         elif isinstance(exc, KeyboardInterrupt):
@@ -785,7 +785,8 @@ class _StreamOrder:
     the command), commands at or after the run's end not at all."""
 
     def __init__(self, rec: BagRecorder, names: Sequence[str]):
-        self.rec, self.names, self.pending = rec, list(names), []
+        self.rec, self.names = rec, list(names)
+        self.pending: list = []
 
     def _command(self, c) -> None:
         t, nm, cur, rate = c

@@ -237,7 +237,7 @@ def _exact_g(kind: str, r2: float, sigma: float, thickness: Optional[float], w: 
 
 
 @lru_cache(maxsize=256)
-def _errors(kind: str, r2: float, sigma: float, thickness: Optional[float], slip: float) -> tuple:
+def _errors(kind: str, r2: float, sigma: float, thickness: Optional[float], slip: float) -> dict:
     """(e_g, e_im) arrays over n = 1..MAX_MODES with and without the tail: dict {tail: (e_g[n-1], e_im[n-1])}."""
     w = slip * np.geomspace(1e-4, 1.0, _GRID)
     g = _exact_g(kind, r2, sigma, thickness, w)
