@@ -1,0 +1,409 @@
+"""The step knobs of each stepper from the tolerance, the error estimate of a run and its error control (the
+shadow run's comparison at fixed checks; :mod:`gyro_sim.scenes.accuracy`, docs/accuracy.md)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, is_legacy)
+
+# --------------------------------------------------------------------------------------------------
+# steps
+# --------------------------------------------------------------------------------------------------
+#: error model of the turn-resolving steppers, for the plan a run starts with: over one turn of the fastest
+#: rotation (spin or field; for the free stepper one turn of the body-frame motion of L) a step of 1/spt of the
+#: turn leaves an error of about C spt^(−order) in L (relative) and in the attitude (rad); the run's error is the
+#: number of turns times that (the spin phase error adds up). Constants: typical of the built-in scenes with each
+#: stepper forced (docs/accuracy.md, "Calibration"); a run then corrects its knobs from its own error estimate
+#: (:class:`ErrorControl`).
+STEP_ERROR = {
+    "lawson8": {"order": 8, "L": 1e-3, "q": 0.1},
+    "etdrk4": {"order": 4, "L": 0.1, "q": 5.0},
+    "free": {"order": 8, "L": 0.0, "q": 50.0},
+}
+#: frozen-flow step: the error per turn is about K ε² with ε = rate_change (second order in the step)
+FROZEN_ERROR = {"L": 3e-6, "q": 0.1}
+#: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε² with ε = rate_change, K the
+#: frozen-flow step's: at equal rate_change its errors were never larger than the frozen-flow step's on the
+#: quasi-static scenes (the same in L, far smaller in the attitude of a spin-up: third order there), docs/accuracy.md
+QS_FLOW_ERROR = {"order": 2, "L": FROZEN_ERROR["L"], "q": FROZEN_ERROR["q"]}
+#: the steppers whose knob is ``rate_change`` (the relative change of the body rate a step may make), not
+#: ``steps_per_turn``
+RATE_KNOB = frozenset({"frozen_flow", "qs_flow"})
+#: the tightest attitude tolerance a plan takes, as a fraction of the spin phase Ω T the run can turn through
+#: (rad): the run's phase holds to about 1e-14 of itself in double precision, and an error δ of L relative turns
+#: into δ Ω T of phase; below this a run warns and plans at the floor (docs/accuracy.md)
+PHASE_REL_MIN = 1e-12
+#: a plan predicting more steps than this warns (minutes of CPU on the machines measured)
+STEPS_WARN = 1e8
+#: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
+SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
+SPT_MAX = 100000  # the scene format's limit of steps_per_turn
+#: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
+RATE_CHANGE_MAX = 5e-4
+QS_RATE_CHANGE_MAX = 1e-2
+RATE_CHANGE_MIN = 1e-9
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """The step knobs of a run (:func:`step_plan`): steps per turn of each turn-resolving stepper, the frozen-flow
+    ``rate_change``, the turns they were chosen for (``turns``: of the fastest rotation over the run;
+    ``free_turns``: of the free rotor's body-frame motion), the step tolerances (``tol_L`` relative, ``tol_q``
+    rad; inf where the attitude is not integrated), which knobs the scene gave (``explicit``) and the quasi-static
+    flow step's ``rate_change`` (``qs_rate_change``; the scene's ``rate_change`` where it gives one)."""
+
+    steps_per_turn: dict
+    rate_change: float
+    turns: float
+    free_turns: float
+    tol_L: float
+    tol_q: float
+    explicit: frozenset = frozenset()
+    qs_rate_change: float = RATE_CHANGE_MAX
+
+    def knob(self, method: str) -> float:
+        """The plan's knob of ``method``: ``rate_change`` (:data:`RATE_KNOB`) or ``steps_per_turn``."""
+        if method == "qs_flow":
+            return self.qs_rate_change
+        return self.rate_change if method == "frozen_flow" else self.steps_per_turn[method]
+
+    def predicted(self, method: str, knob: Optional[float] = None) -> tuple[float, float]:
+        """(L, attitude) errors the model predicts for ``method`` at ``knob`` (default: the plan's)."""
+        if method == "frozen_flow":
+            eps = self.rate_change if knob is None else knob
+            return FROZEN_ERROR["L"] * eps * eps * self.turns, FROZEN_ERROR["q"] * eps * eps * self.turns
+        if method == "qs_flow":
+            f = self.turns * (self.qs_rate_change if knob is None else knob) ** QS_FLOW_ERROR["order"]
+            return QS_FLOW_ERROR["L"] * f, QS_FLOW_ERROR["q"] * f
+        m = STEP_ERROR[method]
+        spt = self.steps_per_turn[method] if knob is None else knob
+        turns = self.free_turns if method == "free" else self.turns
+        f = turns * float(spt) ** (-m["order"])
+        return m["L"] * f, m["q"] * f
+
+
+def _spt_for(method: str, turns: float, tol_L: float, tol_q: float) -> int:
+    m = STEP_ERROR[method]
+    need = SPT_MIN[method]
+    for key, tol in (("L", tol_L), ("q", tol_q)):
+        if m[key] > 0 and turns > 0 and math.isfinite(tol):
+            need = max(need, math.ceil((turns * m[key] / tol) ** (1.0 / m["order"])))
+    return int(min(need, SPT_MAX))
+
+
+def _rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
+    eps = RATE_CHANGE_MAX
+    for key, tol in (("L", tol_L), ("q", tol_q)):
+        if turns > 0 and math.isfinite(tol):
+            eps = min(eps, math.sqrt(tol / (FROZEN_ERROR[key] * turns)))
+    return max(eps, RATE_CHANGE_MIN)
+
+
+def _qs_rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
+    """The quasi-static flow step's rate_change for the tolerances by :data:`QS_FLOW_ERROR` (K ε^order per turn)."""
+    eps = QS_RATE_CHANGE_MAX
+    for key, tol in (("L", tol_L), ("q", tol_q)):
+        if turns > 0 and math.isfinite(tol):
+            eps = min(eps, (tol / (QS_FLOW_ERROR[key] * turns)) ** (1.0 / QS_FLOW_ERROR["order"]))
+    return max(eps, RATE_CHANGE_MIN)
+
+
+def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) -> StepPlan:
+    """The step knobs of a run of T s (:class:`StepPlan`) for the scene's ``accuracy`` (:data:`STEP_SHARE` of it):
+    ``omega`` the fastest rate (rad/s) the field steppers resolve over the run, ``omega_free`` the free rotor's
+    body-frame rate. Explicit ``integrator.steps_per_turn`` / ``rate_change`` win (the simulator warns where the
+    model says they miss the tolerance, for the stepper it runs)."""
+    acc = scene.accuracy
+    tol_L = STEP_SHARE * acc.rtol
+    # the attitude's absolute tolerance, at least PHASE_REL_MIN of the spin phase the run can turn through (double
+    # precision holds the phase to ~1e-14 of itself at best: a tighter one is planned at that floor)
+    tol_q = (STEP_SHARE * max(acc.attitude, PHASE_REL_MIN * omega * T) if attitude and acc.attitude is not None
+             else math.inf)
+    turns = omega * T / (2 * math.pi)
+    free_turns = omega_free * T / (2 * math.pi)
+    # an error of L made early turns the spin rate and the attitude drifts from then on: with L's error growing
+    # through the run, half the attitude's budget allows an L error of tol_q / (Ω T) at the end
+    plan_L = min(tol_L, tol_q / (omega * T)) if omega * T > 0 else tol_L
+    spt = {m: _spt_for(m, free_turns if m == "free" else turns, plan_L, 0.5 * tol_q) for m in STEP_ERROR}
+    eps = _rate_change_for(turns, plan_L, 0.5 * tol_q)
+    eps_qs = _qs_rate_change_for(turns, plan_L, 0.5 * tol_q)
+    integ = scene.integrator
+    explicit = set()
+    if is_legacy():
+        spt, eps = dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE
+        eps_qs = eps
+        explicit.add("legacy")
+    if integ.steps_per_turn is not None:
+        spt = {m: int(integ.steps_per_turn) for m in spt}
+        explicit.add("steps_per_turn")
+    if integ.rate_change is not None:
+        eps = eps_qs = float(integ.rate_change)
+        explicit.add("rate_change")
+    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit), qs_rate_change=eps_qs)
+
+
+def auto_plan(plan: StepPlan, scene) -> StepPlan:
+    """The plan at the accuracy's own knobs (explicit knobs left out): what ``method: auto`` decides the stepper
+    by (the choice follows the physics and the tolerance; the scene's knobs then set the chosen stepper's
+    accuracy)."""
+    if not plan.explicit or "legacy" in plan.explicit:
+        return plan if "legacy" not in plan.explicit else StepPlan(
+            dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE, plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
+            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE)
+    omT = plan.turns * 2 * math.pi
+    plan_L = min(plan.tol_L, plan.tol_q / omT) if omT > 0 else plan.tol_L
+    tol = (plan_L, 0.5 * plan.tol_q)
+    spt = {m: _spt_for(m, plan.free_turns if m == "free" else plan.turns, *tol) for m in STEP_ERROR}
+    return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
+                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol))
+
+
+# --------------------------------------------------------------------------------------------------
+# the run's error: estimate and control
+# --------------------------------------------------------------------------------------------------
+#: order of each stepper (Richardson: the error of a run is its difference from a run with steps R times longer
+#: over R^p − 1); the free stepper of an axisymmetric or spherical body is exact
+ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8, "qs_flow": 1}
+#: qs_flow (gyro_sim/qs_flow.py) converges at second to third order, but not monotonically: its error terms beat with
+#: the field's ripple (f h mod 2π), and the ratio of its errors at 2h and h measured 1.3 to 13 (docs/accuracy.md);
+#: its stretches are estimated at order 1 (the run's difference from its shadow), as the stiff ETDRK4's below.
+#: ETDRK4 with steps longer than the fastest eddy mode's τ (a stiff step) is far from its order 4: measured on
+#: constant_field (τ = 0.26 ms) its error falls as h^1.4 to h^2 for h from 8 τ to 2 τ (order reduction; Hochbruck &
+#: Ostermann 2005), and the Richardson estimate at order 4 was 6 to 10 times too small. Its stretches are estimated
+#: at order 1 (d/(R − 1): the run's difference from its shadow, an upper bound while the error falls with the step)
+STIFF_ORDER = 1
+STIFF = "etdrk4 (stiff)"
+#: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
+SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0, "qs_flow": 2.0}
+#: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
+#: early ones catch a plan far off, then every 1/16
+CHECKS = tuple(2.0 ** -k for k in range(12, 4, -1)) + tuple(k / 16 for k in range(1, 16))
+#: least ratio of the run's steps to the shadow's over a stepper's stretches for their difference to measure it
+R_MEASURABLE = 1.3
+#: the step share of the tolerance a run aims its projected error at (a margin for the estimate's own error)
+AIM = 0.5
+#: a run refines its step by at most this factor at a check, coarsens it by at most COARSEN, and keeps its step
+#: within [1/MAX_COARSE, MAX_REFINE] of the plan's
+REFINE_MAX = 4.0
+#: at the early checks (before T/16) the step is made shorter only where the projected new error is this many times
+#: the budget, by at most REFINE_MAX_EARLY: they project a short stretch over the whole run
+EARLY_RHO = 4.0
+REFINE_MAX_EARLY = 2.0
+COARSEN = 2.0
+MAX_COARSE = 8.0
+MAX_REFINE = 1e4
+
+
+@dataclass
+class ErrorEstimate:
+    """A run's estimated error over its whole duration (what ``RunResult.error_estimate`` holds).
+
+    ``L``: relative error of L (max over the run of |ΔL| / max |L|); ``attitude``: rad (NaN where the attitude is
+    not a result: not integrated, or averaged out). Each is the sum of its parts: ``steps_*`` (the steps: a
+    Richardson estimate from the shadow run, ``steps_method`` 'richardson', or the step plan's error model where
+    no shadow ran, 'model'), ``modes_*`` (the eddy modes' truncation bound at the largest slip met) and
+    ``averaged_L`` (the averaged models' O(ε), fidelity auto/averaged). ``rtol``/``atol``: the scene's tolerances.
+    """
+
+    L: float
+    attitude: float
+    steps_L: float
+    steps_attitude: float
+    modes_L: float
+    modes_attitude: float
+    averaged_L: float
+    steps_method: str
+    rtol: float
+    atol: float
+
+    @property
+    def met(self) -> bool:
+        """Whether the estimate is within the scene's accuracy."""
+        return self.L <= self.rtol and not (self.attitude > self.atol)  # (atol NaN: no attitude tolerance)
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in ("L", "attitude", "steps_L", "steps_attitude", "modes_L",
+                                              "modes_attitude", "averaged_L", "steps_method", "rtol", "atol")} | {
+            "met": self.met}
+
+    def to_json(self) -> str:
+        """The estimate as one line of JSON (NaN as null): the bag's custom_data ``gyro_sim.error_estimate``."""
+        import json
+
+        return json.dumps({k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                           for k, v in self.as_dict().items()}, separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> "ErrorEstimate":
+        import json
+
+        d = json.loads(text)
+        keys = ("L", "attitude", "steps_L", "steps_attitude", "modes_L", "modes_attitude", "averaged_L",
+                "steps_method", "rtol", "atol")
+        return cls(**{k: (math.nan if d.get(k) is None else d[k]) for k in keys})
+
+    def text(self) -> str:
+        """One line: ``L 3.1e-07 (rtol 1e-06), attitude 2.2e-07 rad (1e-06)``."""
+        att = ("not a result" if not math.isfinite(self.attitude) else f"{self.attitude:.2g} rad"
+               + (f" ({self.atol:g})" if math.isfinite(self.atol) else ""))
+        return (f"L {self.L:.2g} (rtol {self.rtol:g}), attitude {att}"
+                + ("" if self.met else ", beyond the scene's accuracy"))
+
+
+class ErrorControl:
+    """The error estimate of a run and the control of its step (:class:`gyro_sim.simulate.Runner` drives it).
+
+    A shadow run (the same scene, same commands, same stops, steps :data:`SHADOW_RATIO` times longer) goes along;
+    at the check instants (:data:`CHECKS` of the horizon: breaks of every run, in-process and in the ROS node, so
+    both decide alike) their difference gives the run's error (Richardson: d/(R^p − 1), R^p − 1 averaged over the
+    steppers used, weighted by their steps). Errors of L and of the attitude are running maxima.
+
+    Control: an error made in L persists and, through the spin rate, makes the attitude drift at |ΔL|/J_min from
+    then on; no later step undoes it. So the projection to the end is (present error) + (drift of the present L
+    error) × (time left) + (new error: the growth since the previous check that the drift does not explain,
+    and the drift the new L error will start) — and only the new error is the step's to change: the step is made
+    longer or shorter (by up to :data:`COARSEN` / :data:`REFINE_MAX` a check) so that it fills the budget left
+    (:data:`AIM` of the step share less what is committed). Explicit knobs are not changed (they win), only
+    estimated.
+    """
+
+    def __init__(self, plan: StepPlan, attitude: bool, T: float, adapt: bool, J_min: float = 1.0,
+                 L_bound: float = 0.0):
+        self.plan, self.attitude, self.T, self.adapt, self.J_min = plan, attitude, T, adapt, J_min
+        self.L_bound = L_bound  # the largest |L| the run can reach (N m s): the scale of L's relative error ahead
+        self.checks = np.array(sorted({float(T * f) for f in CHECKS if 0 < T * f < T}))
+        self.dL = 0.0  # largest error of L (N m s)
+        self.e_q = 0.0  # rad
+        self.L_max = 0.0
+        self.weights: dict = {}  # steps of each (inexact) stepper
+        self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
+        self.prev = None  # (t, |ΔL| now, attitude error now, error of |L| now) at the previous check
+        self.dLn = 0.0
+        self.banked = (0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
+        self.history: list = []  # (t, e_L, e_q, step_div) at each check
+
+    @property
+    def denom(self) -> float:
+        """r^p − 1 of the run: r the ratio of the run's steps to the shadow's over the stretches of each stepper
+        (SHADOW_RATIO where steps are not cut by stops, more where the run's stops cut its steps and the shadow's
+        do not), harmonically weighted by the run's steps (inf: only exact steps)."""
+        n = sum(self.weights.values())
+        if not n:
+            return math.inf
+        acc, n = 0.0, 0
+        for m, k in self.weights.items():
+            r = k / max(self.shadow_steps.get(m, k), 1)
+            if r >= R_MEASURABLE:  # (where the shadow took the same steps its difference says nothing)
+                acc += k / (r ** ORDER.get(m, STIFF_ORDER) - 1.0)
+                n += k
+        return n / acc if acc > 0 else math.inf
+
+    def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
+                    stiff: bool = False) -> None:
+        """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
+        with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`)."""
+        if stiff and method == "etdrk4":
+            method = STIFF
+        if not exact and steps:
+            self.weights[method] = self.weights.get(method, 0) + steps
+            self.shadow_steps[method] = self.shadow_steps.get(method, 0) + shadow_steps
+
+    @property
+    def e_L(self) -> float:
+        """Relative error of L so far: the largest |ΔL| over the largest |L| seen."""
+        return self.dL / self.L_max if self.L_max > 0 else 0.0
+
+    def note_L(self, L_norm: float) -> None:
+        self.L_max = max(self.L_max, L_norm)
+
+    def _now(self, main, shadow) -> tuple[float, float]:
+        """(|ΔL| N m s, attitude error rad) of the run now from its difference with the shadow; ``self.dLn``: the
+        error of |L| (what turns the spin rate: the attitude drifts at it over J)."""
+        den = self.denom
+        if not math.isfinite(den):
+            self.dLn = 0.0
+            return 0.0, 0.0
+        self.dLn = abs(float(np.linalg.norm(main.y[0:3])) - float(np.linalg.norm(shadow.y[0:3]))) / den
+        dL = float(np.linalg.norm(main.y[0:3] - shadow.y[0:3])) / den
+        dq = 0.0
+        if self.attitude:
+            q, qs = main.y[3:7], shadow.y[3:7]
+            d = min(float(np.linalg.norm(q - qs)), float(np.linalg.norm(q + qs)))
+            dq = 4.0 * math.asin(min(1.0, 0.5 * d)) / den
+        return dL, dq
+
+    def measure(self, main, shadow) -> tuple[float, float, float, float]:
+        """Update the running maxima; returns (|ΔL| now, attitude error now, e_L, e_q)."""
+        self.L_max = max(self.L_max, float(np.linalg.norm(main.y[0:3])))
+        dL, dq = self._now(main, shadow)
+        self.dL = max(self.dL, self.banked[0] + dL)
+        self.e_q = max(self.e_q, self.banked[1] + dq)
+        return dL, dq, self.e_L, self.e_q
+
+    def bank(self) -> None:
+        """Keep the errors so far (the shadow is about to be set to the run's state: a fidelity hand-over)."""
+        self.banked = (self.dL, self.e_q)
+        self.prev = None
+        self.dLn = 0.0
+
+    def coarsest(self, main, method: str) -> float:
+        """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
+        if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
+            return self.plan.rate_change / RATE_CHANGE_MAX
+        if method == "qs_flow":
+            return SHADOW_RATIO[method] * self.plan.qs_rate_change / QS_RATE_CHANGE_MAX
+        div = 1.0
+        if method in SPT_MIN:
+            div = SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]
+        if method == "lawson8" and main.tau.size:  # the shadow's lawson8 step too within 2 τ_min (its order holds)
+            div = max(div, SHADOW_RATIO[method] * main._h_for("lawson8") / (2.0 * main.tau_min))
+        return div
+
+    def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,
+              measurable: bool = True) -> Optional[float]:
+        """At a check instant: measure, and return the factor to divide the step by (None: unchanged).
+        ``torque_now`` / ``torque_mean``: |N| now and its mean since the previous check (errors are made in
+        proportion to the torque: the growth ahead is projected at today's torque); ``measurable``: whether the
+        shadow's steps were longer than the run's since the previous check (else the error made was not seen, and
+        the step is not made longer)."""
+        dL, dq, e_L, e_q = self.measure(main, shadow)
+        dLn = self.dLn
+        self.history.append((t, e_L, e_q, main.step_div))
+        t0, dL0, dq0, dLn0 = self.prev if self.prev is not None else (0.0, 0.0, 0.0, 0.0)
+        self.prev = (t, dL, dq, dLn)
+        if not self.adapt or method not in ORDER or t <= t0:
+            return None
+        if not measurable:  # back to a step the shadow can measure against (never coarser here)
+            return 1.0 / main.step_div if main.step_div < 1.0 else None
+        plan, left = self.plan, self.T - t
+        L_ref = max(self.L_max, self.L_bound, 1e-300)
+        scale = min(torque_now / torque_mean, 1.0) if torque_mean > 0 else 1.0
+        # L: what is made and what the steps will add at the present rate
+        rate_L = scale * max(dL - dL0, 0.0) / (t - t0)
+        new = [rate_L * left / L_ref / plan.tol_L]
+        room = [max(AIM - self.dL / L_ref / plan.tol_L, 0.1 * AIM)]
+        if self.attitude and math.isfinite(plan.tol_q):
+            # the error of |L| turns the spin rate: the attitude drifts at it over J from now on
+            drift, drift0 = dLn / self.J_min, dLn0 / self.J_min
+            rate_Ln = scale * max(dLn - dLn0, 0.0) / (t - t0)
+            committed = e_q + drift * left
+            # growth of the attitude error beyond the drift of the L error there was (the steps' own phase error)
+            rate_q = scale * max((dq - dq0) / (t - t0) - 0.5 * (drift + drift0), 0.0)
+            new.append((rate_q * left + rate_Ln / self.J_min * 0.5 * left * left) / plan.tol_q)
+            room.append(max(AIM - committed / plan.tol_q, 0.1 * AIM))
+        rho = max(n / r for n, r in zip(new, room))
+        settled = all(r > 0.1 * AIM for r in room)  # (no longer steps once the budget is spent)
+        p = ORDER[method]
+        early = t < self.T / 16 * (1 - 1e-12)
+        if rho > (EARLY_RHO if early else 1.0):  # (early checks project a short stretch far: they act on more)
+            f = min(REFINE_MAX_EARLY if early else REFINE_MAX, (rho / 0.6) ** (1.0 / p))
+        elif rho < 0.3 and settled and not early:  # (coarser only on the regular checks' evidence)
+            f = max(1.0 / COARSEN, (max(rho, 1e-300) / 0.6) ** (1.0 / p))
+        else:
+            return None
+        div = min(MAX_REFINE, max(1.0 / MAX_COARSE, self.coarsest(main, method), main.step_div * f))
+        return None if div == main.step_div else div / main.step_div
