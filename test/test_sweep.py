@@ -15,6 +15,7 @@ import pytest
 
 import gyro_sim
 from gyro_sim import sweep as sw
+from gyro_sim.apps import sweep_exec  # (run_chunk and run_sweep live there: patch their names there)
 from gyro_sim.averaged import RotorK
 
 TINY = {"duration": 0.02, "output.rate": 500.0}
@@ -153,7 +154,7 @@ def test_invalid_and_failed_variants_are_recorded_and_the_sweep_goes_on(monkeypa
             r.L[3:] = np.nan
         return r
 
-    monkeypatch.setattr(sw, "_run_scene", flaky)
+    monkeypatch.setattr(sweep_exec, "_run_scene", flaky)
     spec = tiny(vary={"controller.period": "0.001:0.004:4", "initial.theta": "3.0,3.5"})
     res = sw.run_sweep(spec, workers=0, progress=False)
     by = {(r["controller.period"], r["initial.theta"]): r for r in res.rows}
@@ -180,10 +181,10 @@ def test_resume_skips_what_is_done(tmp_path, monkeypatch):
         calls.append(scene.controller.period)
         return real(scene)
 
-    monkeypatch.setattr(sw, "_run_scene", stop_after_two)
+    monkeypatch.setattr(sweep_exec, "_run_scene", stop_after_two)
     first = sw.run_sweep(spec, out=out, workers=0, progress=False)
     assert first.interrupted and len(first.rows) == 2 and out.is_file()
-    monkeypatch.setattr(sw, "_run_scene", real)
+    monkeypatch.setattr(sweep_exec, "_run_scene", real)
     second = sw.run_sweep(spec, out=out, workers=0, progress=False)
     assert second.n_skipped == 2 and second.n_run == 4 and not second.interrupted
     third = sw.run_sweep(spec, out=out, workers=0, progress=False)
@@ -195,7 +196,7 @@ def test_resume_skips_what_is_done(tmp_path, monkeypatch):
     def no_disk(*a, **k):
         raise OSError("disk gone")
 
-    monkeypatch.setattr(sw, "write_results", no_disk)
+    monkeypatch.setattr(sweep_exec, "write_results", no_disk)
     with pytest.raises(OSError):
         sw.run_sweep(spec, out=out2, workers=0, progress=False)
     assert not out2.exists() and sw._journal_path(out2).is_file()
