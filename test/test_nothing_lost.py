@@ -335,10 +335,10 @@ def test_too_little_space_or_read_only_is_refused_before_the_run(tmp_path):
 def test_a_failed_start_leaves_no_directory(tmp_path, monkeypatch):
     """A bag that cannot start (here: no room for its space reserve) leaves neither its directory nor the parents
     made for it."""
-    import gyro_sim.recording as rec_mod
+    import gyro_sim.io.bag_writer as writer_mod  # (BagRecorder's home, where it reads RESERVE_BYTES)
 
-    monkeypatch.setattr(rec_mod, "RESERVE_BYTES", 1 << 60)  # more than any disk
-    with pytest.raises(rec_mod.RecordingError, match="cannot start"):
+    monkeypatch.setattr(writer_mod, "RESERVE_BYTES", 1 << 60)  # more than any disk
+    with pytest.raises(writer_mod.RecordingError, match="cannot start"):
         BagRecorder(tmp_path / "a" / "b" / "bag", "x: 1\n", "x")
     assert os.listdir(tmp_path) == []
 

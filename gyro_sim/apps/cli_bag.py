@@ -1,0 +1,248 @@
+"""The ``gyro-sim`` commands on recorded bags (:mod:`gyro_sim.apps.cli`): ``info``, ``plot``, ``replay`` and
+``bag recover``, and the summary of a bag that ``run --record`` / ``--ros`` print."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from gyro_sim.apps.console import _write
+from gyro_sim.apps.cli_common import (
+    EXIT_OK, EXIT_USAGE, _error, _num, _ros_missing, format_summary,
+)
+
+
+#: samples of a bag read for its summary and plot (every k-th and the last)
+PLOT_SAMPLES = 20_000
+
+
+def _bag_scene(b):
+    """The bag's embedded scene (a Scene: stator axes for the plot's slip), or None if it has none or it is unreadable."""
+    from gyro_sim.scenes.scene import parse_scene_text, scene_from_dict
+
+    try:
+        return scene_from_dict(parse_scene_text(b.scene_text, "(embedded scene)"), where="(embedded scene)")
+    except Exception:  # noqa: BLE001 - an old or damaged bag: the plot goes without slip
+        return None
+
+
+def _bag_result(bag: Path):
+    """A RunResult-like view of a recorded bag (for the summary and the plot)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from gyro_sim.io.recording import bag_info, read_bag
+
+    b = read_bag(bag, max_samples=PLOT_SAMPLES)  # (thinned: memory bounded however long the run)
+    info = bag_info(bag)
+    J = None
+    try:
+        from gyro_sim.scenes.scene_text import parse_scene_text
+
+        J = np.array(parse_scene_text(b.scene_text)["rotor"]["inertia"], dtype=float)
+    except Exception:
+        pass
+    energy = 0.5 * np.sum(b.omega_b**2 * J, axis=1) if J is not None else np.full(len(b.t), np.nan)
+    from gyro_sim.io.plotting import commands_from_arrays
+
+    res = SimpleNamespace(t=b.t, L=b.L, q=b.q, omega_b=b.omega_b, euler=b.euler, current=b.current,
+                          field_rate=b.rate, stator_names=b.stator_names,
+                          commands=commands_from_arrays(b.command_t, b.stator_names, b.command_current,
+                                                        b.command_rate),
+                          scene=_bag_scene(b) or SimpleNamespace(name=b.scene_name or bag.name))
+    wall = info["custom"].get("gyro_sim.wall_time")
+    steps = info["custom"].get("gyro_sim.steps")
+    est = None
+    if info["custom"].get("gyro_sim.error_estimate"):
+        from gyro_sim.scenes.accuracy import ErrorEstimate
+        from gyro_sim.engine.simulate import error_summary
+
+        try:
+            est = ErrorEstimate.from_json(str(info["custom"]["gyro_sim.error_estimate"]))
+        except (ValueError, TypeError, KeyError):
+            est = None
+    summary = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
+               "theta_deg": float(np.degrees(b.euler[-1, 1])), "L_norm": float(np.linalg.norm(b.L[-1])),
+               "energy": float(energy[-1]), "t_end": float(b.t[-1]),
+               "wall_time": float(wall) if wall else None, "steps": int(steps) if steps else None,
+               "realtime_factor": float(b.t[-1]) / float(wall) if wall else None}
+    if est is not None:
+        summary.update(error_summary(est))
+    return res, summary, b, info
+
+
+def _unreadable(bag: Path, exc: Exception) -> int:
+    """The one error line for a bag that cannot be read: a recording that was not closed is named as
+    such, with the command that recovers it."""
+    from gyro_sim.io.bag_repair import not_closed_message
+
+    return _error(not_closed_message(bag) or f"cannot read the bag {bag}: {exc}")
+
+
+def _summarise_bag(bag: Path, png: Path) -> int:
+    from gyro_sim.io import plotting
+
+    try:
+        res, summary, b, info = _bag_result(bag)
+    except Exception as exc:  # a bag that cannot be read
+        return _unreadable(bag, exc)
+    plotting.plot_run(res, png)
+    _write(sys.stdout, format_summary(res.scene.name, summary, png))
+    _write(sys.stdout, f"{'bag':<16}  {bag} ({info['message_count']} messages)\n")
+    if b.status:
+        _write(sys.stdout, f"{'last status':<16}  {b.status[-1]}\n")
+    return EXIT_OK
+
+
+def _cmd_info(args) -> int:
+    from gyro_sim.io.recording import bag_info
+
+    try:
+        info = bag_info(args.bag)
+    except Exception as exc:
+        return _unreadable(args.bag, exc)
+    rows = _info_rows(info)
+    width = max(len(r[0]) for r in rows)
+    _write(sys.stdout, "".join(f"{a:<{width}}  {b}\n" for a, b in rows))
+    tw = max(len(t) for t in info["topics"]) if info["topics"] else 0
+    for topic, ti in info["topics"].items():
+        _write(sys.stdout, f"  {topic:<{tw}}  {ti['type']:<34} {ti['count']:>8}\n")
+    return EXIT_OK
+
+
+def _seconds(value) -> str:
+    """A time in seconds to 3 significant digits (whole seconds from 1000 s up), with its unit."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f"{v:.0f} s" if abs(v) >= 1000 else f"{v:.3g} s"
+
+
+def _info_rows(info: dict) -> list:
+    """(label, value) rows of ``gyro-sim info`` from :func:`gyro_sim.recording.bag_info`: one duration (the
+    recorded span; the planned one beside it where the run ended early), times with units, the error estimate
+    as in the run summary, then any other custom_data key as it is."""
+    custom = {k.removeprefix("gyro_sim."): v for k, v in info["custom"].items()}
+    span = f"{info['duration']:.6g} s (t = {info['start']:.6g} to {info['end']:.6g} s"
+    planned = custom.get("planned_duration")
+    try:
+        early = planned is not None and abs(float(planned) - info["end"]) > 1e-9 * max(1.0, abs(float(planned)))
+    except (TypeError, ValueError):
+        early = False
+    span += f"; planned {_num(float(planned), '.6g')} s)" if early else ")"
+    rows = [("bag", str(info["path"])),
+            ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
+            ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
+            ("duration", span), ("messages", str(info["message_count"])), ("end", str(info["end_reason"]))]
+    if "mode" in custom:
+        rows.append(("mode", str(custom["mode"])))
+    if custom.get("wall_time"):
+        wall = _seconds(custom["wall_time"])
+        if custom.get("compile_time") and float(custom["compile_time"]) > 0:
+            wall += f" (+ {_seconds(custom['compile_time'])} compiling the kernels, first use)"
+        rows.append(("wall time", wall))
+    if "steps" in custom:
+        rows.append(("steps", str(custom["steps"])))
+    if "control_period" in custom:
+        rows.append(("control period", _seconds(custom["control_period"])))
+    if custom.get("error_estimate"):
+        rows.append(_error_row(custom["error_estimate"]))
+    shown = {"scene_name", "version", "end", "scene", "duration", "planned_duration", "mode", "wall_time",
+             "compile_time", "steps", "control_period", "error_estimate"}
+    rows += [(k.replace("_", " "), str(v)) for k, v in sorted(custom.items()) if k not in shown]
+    return rows
+
+
+def _error_row(text: str) -> tuple:
+    """The ``estimated error`` row (as in the run summary) of a bag's ``gyro_sim.error_estimate``, or its raw
+    text if it cannot be read."""
+    from gyro_sim.scenes.accuracy import ErrorEstimate
+    from gyro_sim.engine.simulate import error_summary
+
+    try:
+        summary = error_summary(ErrorEstimate.from_json(str(text)))
+    except (ValueError, TypeError, KeyError):
+        return ("error estimate", str(text))
+    row = [r for r in format_summary("", summary).splitlines() if r.startswith("estimated error")]
+    return ("estimated error", row[0].removeprefix("estimated error").strip()) if row else ("error estimate", str(text))
+
+
+def _cmd_plot(args) -> int:
+    from gyro_sim.io import plotting
+
+    try:
+        res, _, _, _ = _bag_result(args.bag)
+    except Exception as exc:
+        return _unreadable(args.bag, exc)
+    png = args.out or args.bag / f"{res.scene.name}.png"
+    plotting.plot_run(res, png)
+    _write(sys.stdout, f"plot: {png}\n")
+    return EXIT_OK
+
+
+def _cmd_replay(args) -> int:
+    if not args.check and _ros_missing("gyro-sim replay (without --check)"):
+        return EXIT_USAGE
+    if not (math.isfinite(args.rate) and args.rate > 0):
+        return _error(f"--rate {args.rate}: must be a positive number")
+    if args.wait_for_subscribers < 0:
+        return _error(f"--wait-for-subscribers {args.wait_for_subscribers}: must be an integer ≥ 0")
+    from gyro_sim.io.bag_repair import not_closed_message
+
+    if (cut := not_closed_message(args.bag)) is not None:  # (neither the re-run nor the player could read it)
+        return _error(cut)
+    if args.check:
+        from gyro_sim.io.rerun import rerun_bag
+        from gyro_sim.scenes.scene import SceneError
+
+        try:
+            rep = rerun_bag(args.bag)
+        except (SceneError, OSError, ValueError) as exc:
+            return _error(str(exc))
+        d = rep["max_abs_diff"]
+        _write(sys.stdout, f"re-ran {rep['samples_rerun']} samples (bag: {rep['samples_recorded']}); largest |Δ|: "
+                           + ", ".join(f"{k} {v:.3g}" for k, v in d.items())
+                           + (" — identical to the bit\n" if rep["identical"] else " — NOT identical\n"))
+        return EXIT_OK if rep["identical"] else 1
+    import subprocess
+
+    from gyro_sim.ros.launch import ros_env
+
+    return subprocess.call([sys.executable, "-m", "gyro_sim.ros.replay", str(args.bag), repr(float(args.rate)),
+                            "--wait-for-subscribers", str(args.wait_for_subscribers)], env=ros_env())
+
+
+def _cmd_bag_recover(args) -> int:
+    from gyro_sim.io.bag_repair import RecoverError, recover_bag
+
+    try:
+        rep = recover_bag(args.bag)
+    except RecoverError as exc:
+        return _error(str(exc))
+    _write(sys.stdout, _format_recovery(rep))
+    return EXIT_OK
+
+
+def _format_recovery(rep: dict) -> str:
+    """What ``gyro-sim bag recover`` prints, from :func:`gyro_sim.bag_repair.recover_bag`'s report."""
+    span = (f"t = {rep['start_ns'] / 1e9:.6g} to {rep['end_ns'] / 1e9:.6g} s"
+            if rep["messages"] else "no time span")
+    used = sum(1 for _, n in rep["topics"].values() if n)
+    lines = [f"recovered {rep['path']}: {rep['messages']} messages on {used} of {len(rep['topics'])} topics, {span}",
+             f"  scene     {rep['scene_name']}" + ("" if rep["scene_found"] else " (no scene found in the bag)")]
+    if rep["cut"]:
+        lines.append(f"  dropped   the last {rep['dropped_bytes']} of {rep['size']} bytes: {rep['stop']}")
+    else:
+        lines.append(f"  dropped   no message: the data section is whole; the {rep['dropped_bytes']} bytes after it "
+                     "(summary, footer) are rebuilt")
+    for bad in rep["bad_chunks"]:
+        lines.append(f"  skipped   {bad}")
+    for kind, n in sorted(rep["not_copied"].items()):
+        lines.append(f"  not kept  {n} {kind} record(s) (not carried over by the rosbag2 writer)")
+    for old, aside in rep["set_aside"].items():
+        lines.append(f"  kept      the {'damaged' if old.endswith('.mcap') else 'old'} {old} as {aside}")
+    width = max((len(t) for t in rep["topics"]), default=0)
+    lines += [f"  {t:<{width}}  {ty:<34} {n:>8}" for t, (ty, n) in sorted(rep["topics"].items())]
+    return "".join(line + "\n" for line in lines)
