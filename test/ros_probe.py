@@ -96,7 +96,15 @@ def bad_commands(seconds: float, period: float) -> None:
         (["z1"], [1.0], [float("inf")]),  # infinite rate
     ]
     end = time.time() + seconds
+    seen = False  # the simulator's subscription to the commands was matched once
     while time.time() < end and not done:
+        # the simulator gone (its subscription unmatched) ends the flood too: a "done:" it published as it exited
+        # can be lost to a flooder starved of CPU (under load the flooder then ran to its 150 s and the test's
+        # 180 s wait for it expired)
+        n = pub.get_subscription_count()
+        seen = seen or n > 0
+        if seen and n == 0:
+            break
         for names, eff, vel in bad:
             m = cls()
             m.name, m.effort, m.velocity = names, eff, vel
