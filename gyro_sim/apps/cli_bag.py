@@ -18,10 +18,10 @@ PLOT_SAMPLES = 20_000
 
 def _bag_scene(b):
     """The bag's embedded scene (a Scene: stator axes for the plot's slip), or None if it has none or it is unreadable."""
-    from gyro_sim.scenes.scene import parse_scene_text, scene_from_dict
+    from gyro_sim.io.results import _bag_scene as embedded_scene
 
     try:
-        return scene_from_dict(parse_scene_text(b.scene_text, "(embedded scene)"), where="(embedded scene)")
+        return embedded_scene(b, None)
     except Exception:  # noqa: BLE001 - an old or damaged bag: the plot goes without slip
         return None
 
@@ -44,24 +44,15 @@ def _bag_result(bag: Path):
     except Exception:
         pass
     energy = 0.5 * np.sum(b.omega_b**2 * J, axis=1) if J is not None else np.full(len(b.t), np.nan)
-    from gyro_sim.io.plotting import commands_from_arrays
+    from gyro_sim.engine.simulate import error_summary
+    from gyro_sim.io.results import bag_commands, parse_error_estimate
 
     res = SimpleNamespace(t=b.t, L=b.L, q=b.q, omega_b=b.omega_b, euler=b.euler, current=b.current,
-                          field_rate=b.rate, stator_names=b.stator_names,
-                          commands=commands_from_arrays(b.command_t, b.stator_names, b.command_current,
-                                                        b.command_rate),
+                          field_rate=b.rate, stator_names=b.stator_names, commands=bag_commands(b),
                           scene=_bag_scene(b) or SimpleNamespace(name=b.scene_name or bag.name))
     wall = info["custom"].get("gyro_sim.wall_time")
     steps = info["custom"].get("gyro_sim.steps")
-    est = None
-    if info["custom"].get("gyro_sim.error_estimate"):
-        from gyro_sim.scenes.accuracy import ErrorEstimate
-        from gyro_sim.engine.simulate import error_summary
-
-        try:
-            est = ErrorEstimate.from_json(str(info["custom"]["gyro_sim.error_estimate"]))
-        except (ValueError, TypeError, KeyError):
-            est = None
+    est = parse_error_estimate(info["custom"].get("gyro_sim.error_estimate"))
     summary = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
                "theta_deg": float(np.degrees(b.euler[-1, 1])), "L_norm": float(np.linalg.norm(b.L[-1])),
                "energy": float(energy[-1]), "t_end": float(b.t[-1]),
@@ -158,13 +149,13 @@ def _info_rows(info: dict) -> list:
 def _error_row(text: str) -> tuple:
     """The ``estimated error`` row (as in the run summary) of a bag's ``gyro_sim.error_estimate``, or its raw
     text if it cannot be read."""
-    from gyro_sim.scenes.accuracy import ErrorEstimate
     from gyro_sim.engine.simulate import error_summary
+    from gyro_sim.io.results import parse_error_estimate
 
-    try:
-        summary = error_summary(ErrorEstimate.from_json(str(text)))
-    except (ValueError, TypeError, KeyError):
+    est = parse_error_estimate(text)
+    if est is None:
         return ("error estimate", str(text))
+    summary = error_summary(est)
     row = [r for r in format_summary("", summary).splitlines() if r.startswith("estimated error")]
     return ("estimated error", row[0].removeprefix("estimated error").strip()) if row else ("error estimate", str(text))
 

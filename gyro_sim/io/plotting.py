@@ -192,22 +192,6 @@ def command_events(result) -> CommandEvents:
     return CommandEvents(np.asarray(switching, dtype=float), np.asarray(changes, dtype=float))
 
 
-def commands_from_arrays(t, names, current, rate) -> list:
-    """``RunResult.commands`` rows from a bag's command arrays: ``t`` (m,) s, ``current`` and ``rate`` (m, k)
-    A and rad/s, NaN = not commanded (``BagData.command_t``, ``command_current``, ``command_rate``)."""
-    t = np.asarray(t, dtype=float).ravel()
-    m, k = t.size, len(names)
-    current = np.asarray(current, dtype=float).reshape(m, k)
-    rate = np.asarray(rate, dtype=float).reshape(m, k)
-    rows = []
-    for i in range(m):
-        cols = [j for j in range(k) if np.isfinite(current[i, j]) or np.isfinite(rate[i, j])]
-        rows.append((float(t[i]), [names[j] for j in cols],
-                     [float(current[i, j]) if np.isfinite(current[i, j]) else None for j in cols],
-                     [float(rate[i, j]) if np.isfinite(rate[i, j]) else None for j in cols]))
-    return rows
-
-
 # --- slip ----------------------------------------------------------------------------------------------
 def _stator_axes(result, names):
     """(k, 3) unit axes u_k of the stators (case frame), from ``result.scene.stators``; None if unknown."""

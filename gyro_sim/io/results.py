@@ -26,9 +26,11 @@ from gyro_sim.engine.result import (EFFECTS, INSTALL_DATA, SERIES, MissingExtraE
 
 if TYPE_CHECKING:  # pragma: no cover
     from gyro_sim.engine.result import RunResult
+    from gyro_sim.scenes.accuracy import ErrorEstimate
     from gyro_sim.io.recording import BagData
 
-__all__ = ["to_dataframe", "to_xarray", "result_repr", "read_bag", "result_from_bag", "MissingExtraError",
+__all__ = ["to_dataframe", "to_xarray", "result_repr", "read_bag", "result_from_bag", "bag_commands",
+           "parse_error_estimate", "MissingExtraError",
            "SERIES", "EFFECTS", "INSTALL_DATA"]
 
 # --- a RunResult from a bag --------------------------------------------------------------------------
@@ -68,8 +70,11 @@ def _grid(scene, data: "BagData", duration: Optional[float], control_period: Opt
         return {}
 
 
-def _bag_commands(data: "BagData", grid: dict) -> list:
-    """The commands a bag holds as RunResult.commands: (t s, names, currents A | None, rates rad/s | None)."""
+def bag_commands(data: "BagData", grid: Optional[dict] = None) -> list:
+    """The commands a bag holds as RunResult.commands: (t s, names, currents A | None, rates rad/s | None); a
+    NaN column is a stator the command does not set. ``grid`` (ns stamp → the run's exact instant, :func:`_grid`)
+    gives the times their float bits; without it they are the stamps in s."""
+    grid = grid or {}
     names = list(data.stator_names)
     out = []
     for i, tc in enumerate(data.command_t.tolist()):
@@ -81,6 +86,19 @@ def _bag_commands(data: "BagData", grid: dict) -> list:
                     None if all(c is None for c in currents) else currents,
                     None if all(x is None for x in rates) else rates))
     return out
+
+
+def parse_error_estimate(text) -> "Optional[ErrorEstimate]":
+    """A bag's ``gyro_sim.error_estimate`` custom data as an ErrorEstimate; None where absent or unreadable (a bag
+    of another version: no estimate rather than no result)."""
+    from gyro_sim.scenes.accuracy import ErrorEstimate
+
+    if not text:
+        return None
+    try:
+        return ErrorEstimate.from_json(str(text))
+    except (ValueError, TypeError, KeyError):
+        return None
 
 
 def _bag_effects(data: "BagData") -> dict:
@@ -109,7 +127,6 @@ def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Opti
     scene's schedule and the watchdog's zeroing as applied: not the scene's initial settings); ``modes`` (not
     recorded) has no columns; ``wall_time``, ``steps`` and the error estimate come from the bag's custom data
     (``compile_time`` too where the recorder wrote it). Bags always hold the attitude (``attitude`` True)."""
-    from gyro_sim.scenes.accuracy import ErrorEstimate
     from gyro_sim.io.recording import BagData
     from gyro_sim.io.recording import read_bag as read_bag_data
     from gyro_sim.engine.simulate import RunResult, kinetic_energy
@@ -121,17 +138,13 @@ def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Opti
         control_period = _custom_float(custom, "gyro_sim.control_period")
     grid = _grid(scene, data, duration, control_period)
     t = np.array([grid.get(ns, ns / 1e9) for ns in data.t_ns.tolist()], dtype=float)
-    est = custom.get("gyro_sim.error_estimate")
-    try:
-        est = ErrorEstimate.from_json(est) if est else None
-    except (ValueError, TypeError):  # (a bag of another version: no estimate rather than no result)
-        est = None
+    est = parse_error_estimate(custom.get("gyro_sim.error_estimate"))
     return RunResult(scene=scene, t=t, L=data.L, q=data.q, omega_b=data.omega_b, torque=data.torque,
                      energy=kinetic_energy(scene.inertia, data.omega_b), stator_names=list(data.stator_names),
                      current=data.current, field_rate=data.rate, field_phase=data.phase, modes=np.zeros((t.size, 0)),
                      wall_time=_custom_float(custom, "gyro_sim.wall_time") or 0.0,
                      compile_time=_custom_float(custom, "gyro_sim.compile_time") or 0.0,
-                     steps=int(_custom_float(custom, "gyro_sim.steps") or 0), commands=_bag_commands(data, grid),
+                     steps=int(_custom_float(custom, "gyro_sim.steps") or 0), commands=bag_commands(data, grid),
                      effects=_bag_effects(data), attitude=True, error_estimate=est)
 
 
