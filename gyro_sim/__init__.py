@@ -66,13 +66,18 @@ class _OldPaths(importlib.abc.MetaPathFinder, importlib.abc.Loader):
             return None
         return importlib.util.spec_from_loader(name, self)
 
+    def __init__(self):
+        self._specs: dict = {}  # alias name → its home's own spec, between create_module and exec_module
+
     def create_module(self, spec):
         module = importlib.import_module(self._home(spec.name))
-        self._spec = module.__spec__  # (the import machinery sets __spec__ to the alias's: put back in exec_module)
+        # the import machinery sets __spec__ to the alias's: put back in exec_module (kept per name: two threads
+        # importing two old paths at once do not mix them up)
+        self._specs[spec.name] = module.__spec__
         return module
 
     def exec_module(self, module):
-        module.__spec__ = self._spec  # (the home module ran when create_module imported it)
+        module.__spec__ = self._specs.pop(module.__spec__.name)  # (the home module ran when create_module imported it)
 
     def get_code(self, name):  # runpy: python -m gyro_sim.<old>
         home = self._home(name)
