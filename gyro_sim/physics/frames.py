@@ -128,3 +128,43 @@ def nutation_angle(q: np.ndarray, L: np.ndarray) -> float:
         return 0.0
     c0, c1, c2 = a[1] * L2 - a[2] * L1, a[2] * L0 - a[0] * L2, a[0] * L1 - a[1] * L0
     return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a[0] * L0 + a[1] * L1 + a[2] * L2)
+
+
+def symmetry_axis(J) -> int:
+    """Index (0, 1, 2) of the body's symmetry axis from principal moments J (kg m²): the axis whose moment differs
+    where two are equal (2 for an isotropic body: x3), −1 for a triaxial body (no symmetry axis)."""
+    J0, J1, J2 = (float(v) for v in J)
+    if J0 == J1:
+        return 2
+    if J1 == J2:
+        return 0
+    if J0 == J2:
+        return 1
+    return -1
+
+
+def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Split the difference of two attitudes (unit quaternions (..., 4), body → case) into what an engineer
+    observes and the spin phase: ``(direction, phase)`` in rad.
+
+    ``direction``: the angle between the body's symmetry axis x_axis in the two attitudes (the directions of the
+    rotor's axes up to its spin about that axis); ``phase``: the twist about the symmetry axis of the relative
+    rotation q1⁻¹ ⊗ q2 (swing–twist decomposition), i.e. the error of the spin phase. ``axis`` −1 (triaxial: no
+    symmetry axis): ``direction`` is the whole rotation angle between them and ``phase`` is 0."""
+    q1 = np.asarray(q1, dtype=float)
+    q2 = np.asarray(q2, dtype=float)
+    w1, v1 = q1[..., 0], q1[..., 1:]
+    w2, v2 = q2[..., 0], q2[..., 1:]
+    # relative rotation r = q1⁻¹ ⊗ q2 in the body frame
+    w = w1 * w2 + np.sum(v1 * v2, axis=-1)
+    v = w1[..., None] * v2 - w2[..., None] * v1 - np.cross(v1, v2)
+    if axis < 0:
+        whole = 2.0 * np.arctan2(np.linalg.norm(v, axis=-1), np.abs(w))
+        return whole, np.zeros_like(whole)
+    va = v[..., axis]
+    # twist angle about the axis; the swing's angle is the angle between the axis and its image
+    twist = 2.0 * np.arctan2(va, w)
+    twist = np.abs((twist + np.pi) % (2.0 * np.pi) - np.pi)
+    swing_s = np.sqrt(np.maximum(np.sum(v * v, axis=-1) - va * va, 0.0))
+    swing = 2.0 * np.arctan2(swing_s, np.sqrt(w * w + va * va))
+    return swing, twist
