@@ -14,9 +14,14 @@ from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period,
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
-from gyro_sim.physics.frames import euler_angles, quat_to_matrix
-from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
+from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
+from gyro_sim.scenes.accuracy import (R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl, ErrorEstimate,
+                                      is_legacy)
 from gyro_sim.scenes.scene import Scene, SceneError
+from gyro_sim.scenes.tolerance import phase_tolerance
+
+#: unit round-off of a double (the phases' floor: ErrorEstimate.round_off)
+ROUND_OFF = 2.0 ** -52
 
 
 class Runner:
@@ -58,17 +63,25 @@ class Runner:
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
             estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
         self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
-                                    J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound)
-        self.shadow = None
+                                    J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound,
+                                    axis=symmetry_axis(self.sim.J))
+        self.shadow = self.shadow2 = None
         if estimate:
             self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
             self.shadow.leader = self.sim
+            if self.sim.may_take_frozen_flow():
+                # a second shadow, its steps SHADOW_RATIO times the first's (1/16 of the run's work): the three give
+                # the order the frozen-flow step shows on this run (ErrorControl.order_seen)
+                self.shadow2 = Simulator(scene, attitude, horizon=H, quiet=True)
+                self.shadow2.leader = self.sim
+                self.shadow2.shadow_mult = SHADOW_RATIO["frozen_flow"]
         self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
         self._ck = 0  # the next check
         self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
         self._steps_seen = 0
         self._impulse = 0.0  # ∫|N| dt over the output samples (N·m·s): the modes' error of L
         self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
+        self._turned = 0.0  # ∫ |Ω| dt over the output samples (rad, |Ω| ≤ |L|/J_min): the phase the rotor turns
         self._last_t = 0.0
         self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.Jinv))
         self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
@@ -179,8 +192,9 @@ class Runner:
             if name not in self.sim.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
         self.sim.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
-        if self.shadow is not None:
-            self.shadow.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+        for sh in (self.shadow, self.shadow2):
+            if sh is not None:
+                sh.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
@@ -227,9 +241,14 @@ class Runner:
             method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
             s0 = sh.steps
             sh.advance(tb)
+            s2 = 0
+            if self.shadow2 is not None:
+                s2 = self.shadow2.steps
+                self.shadow2.advance(tb)
+                s2 = self.shadow2.steps - s2
             self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
                                      exact=free and sim._free_axis != -1,
-                                     stiff=h > sim.tau_min)
+                                     stiff=h > sim.tau_min, shadow2_steps=s2)
             self._steps_seen = sim.steps
         else:
             return
@@ -242,12 +261,13 @@ class Runner:
             n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
             self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
-            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
+            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, shadow2=self.shadow2)
             if f is not None:
                 sim.step_div *= f
             if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
-                sim.replan()
-                sh.replan()
+                for s in (sim, sh, self.shadow2):
+                    if s is not None:
+                        s.replan()
 
     def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate)."""
@@ -256,13 +276,14 @@ class Runner:
         r = slice(rows.start, rows.start + sel.size)
         Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
         self.control.note_L(float(np.max(Ln)))
+        dt = np.diff(np.concatenate([[self._last_t], sel]))
+        om = Ln * float(np.max(self.sim.Jinv))
+        # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
+        self._turned = float(np.cumsum(np.concatenate([[self._turned], om * dt]))[-1])
         if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
             self._last_t = float(sel[-1])
             return
-        dt = np.diff(np.concatenate([[self._last_t], sel]))
         N = np.linalg.norm(self.out_N[r], axis=1)
-        om = Ln * float(np.max(self.sim.Jinv))
-        # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
         self._impulse = float(np.cumsum(np.concatenate([[self._impulse], N * dt]))[-1])
         self._spin_dev = float(np.cumsum(np.concatenate([[self._spin_dev], np.abs(om - self._om0) * dt]))[-1])
         self._last_t = float(sel[-1])
@@ -272,13 +293,16 @@ class Runner:
         shadow afresh from the run's state."""
         if self.shadow is None:
             return
-        sim, sh = self.sim, self.shadow
-        self.control.measure(sim, sh)
+        sim = self.sim
+        self.control.measure(sim, self.shadow, self.shadow2)
         self.control.bank()
-        sh.y[:] = sim.y
-        sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
-        sh._nu_max = sim._nu_max
-        sh.replan()
+        for sh in (self.shadow, self.shadow2):
+            if sh is None:
+                continue
+            sh.y[:] = sim.y
+            sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
+            sh._nu_max = sim._nu_max
+            sh.replan()
 
     def error_estimate(self) -> ErrorEstimate:
         """The run's estimated error so far (over the whole duration once it is done): the steps' (from the shadow,
@@ -287,7 +311,7 @@ class Runner:
         ctl = self.control
         L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
         if self.shadow is not None:
-            sL, sq, how = *ctl.measure(sim, self.shadow)[2:], "richardson"
+            sL, sq, sp, how = *ctl.measure(sim, self.shadow, self.shadow2)[3:], "richardson"
             # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
             # closer than the step): the plan's model at the knob they ran
             for m, k in ctl.weights.items():
@@ -297,24 +321,34 @@ class Runner:
                 knob = (sim.step_plan.knob(m) / sim.step_div if m in RATE_KNOB
                         else sim.step_plan.knob(m) * sim.step_div)
                 pL, pq = sim.step_plan.predicted(m, knob)
-                sL, sq, how = sL + pL, sq + pq, "richardson+model"
+                sL, sq, sp, how = sL + pL, sq + pq, sp + pq, "richardson+model"
         else:
             used = sorted(getattr(sim, "methods_used", set()) or {"free"})
             pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim._free_axis == -1]
             sL = max([p[0] for p in pred] + [0.0])
-            sq = max([p[1] for p in pred] + [0.0])
+            sq = sp = max([p[1] for p in pred] + [0.0])
             how = "model"
         e_g, e_im = sim.mode_plan.error_at(max(sim.slip_met, 0.0))
         mL = max(e_g, e_im) * self._impulse / L_max
-        mq = e_im * self._spin_dev
+        mq = e_im * self._spin_dev  # (a torque error turns the spin and precession rates: phases, directions)
         aL = 0.0
         if self.averaged_eps:  # (only a hybrid run has averaged stretches: gyro_sim.fidelity imports SciPy's solvers)
             aL = AVERAGED_ERROR * max(self.averaged_eps)
         att = sim.attitude and not self.averaged_eps
-        return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq) if att else math.nan, steps_L=sL,
+        # round-off: each step's phase update errs by ~u of the angle and of the unit quaternion, and the
+        # conserved |L| and energy random-walk by u √n of themselves, which turns the phases' rates
+        n = max(sim.steps, 1)
+        ro = ROUND_OFF * (self._turned * (1.0 + math.sqrt(n)) + n) if att else 0.0
+        sym = symmetry_axis(sim.J) >= 0
+        phase_tol = phase_tolerance(acc, self._turned / max(self.T, 1e-300), self.T) if sym else math.nan
+        return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq + ro) if att else math.nan, steps_L=sL,
                              steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
                              averaged_L=aL, steps_method=how, rtol=acc.rtol,
-                             atol=math.nan if acc.attitude is None else acc.attitude)
+                             atol=math.nan if acc.attitude is None else acc.attitude,
+                             phase=(sp + mq + ro) if att and sym else math.nan,
+                             steps_phase=sp if att and sym else math.nan,
+                             modes_phase=mq if att and sym else math.nan,
+                             phase_tol=phase_tol if att else math.nan, round_off=ro)
 
     # --- exact switching instants ------------------------------------------------------------
     def _snapshot(self) -> tuple:

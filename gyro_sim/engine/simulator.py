@@ -35,6 +35,7 @@ class Simulator:
         # run follows its ``leader``: the same stepper, steps SHADOW_RATIO times the leader's
         self.step_div = 1.0
         self.leader: Optional["Simulator"] = None
+        self.shadow_mult = 1.0  # a second shadow's steps: SHADOW_RATIO × this times the leader's (Runner.shadow2)
         self.attitude = integrates_attitude(scene, attitude)
         J = scene.inertia
         self.J = J
@@ -307,6 +308,12 @@ class Simulator:
         self._check_knob(m)
         return m, self._max_step(False, m)
 
+    def may_take_frozen_flow(self) -> bool:
+        """Whether a field step of this run can be the frozen-flow step (axisymmetric or isotropic rotor, no effect,
+        the eddy-mode model, ``method`` auto or frozen_flow): the runs whose error control takes a second shadow."""
+        return (frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0 and self.c_m > 0
+                and self.scene.torque_model == "lag" and self.scene.integrator.method in ("auto", "frozen_flow"))
+
     def _qs_applies(self) -> bool:
         """Whether ``auto`` takes the quasi-static flow step (gyro_sim/qs_flow.py) where it would take frozen_flow:
         on the quasi-static torque model (not in the old defaults' runs, gyro_sim.accuracy.legacy). Its step is as
@@ -324,9 +331,15 @@ class Simulator:
         if self.attitude and acc.attitude is not None and acc.attitude < floor:
             accuracy_warning(
                 f"scene {self.scene.name!r}: accuracy.attitude = {acc.attitude:g} rad cannot be held over {T:g} s: "
-                f"the spin phase the run can turn through is {om_plan * T:.3g} rad, and a run holds it to about "
+                f"the phase the run can turn through is {om_plan * T:.3g} rad, and a run holds it to about "
                 f"{PHASE_REL_MIN:g} of itself; planning for {floor:.2g} rad (the estimate reports what is reached; "
                 f"set accuracy.attitude to at least that, or output.attitude: false where only L matters)")
+        if self.attitude and acc.phase_atol is not None and acc.phase_atol < floor:
+            accuracy_warning(
+                f"scene {self.scene.name!r}: accuracy.phase_atol = {acc.phase_atol:g} rad cannot be held over "
+                f"{T:g} s: the spin phase the run can turn through is {om_plan * T:.3g} rad, and a run holds it to "
+                f"about {PHASE_REL_MIN:g} of itself; planning for {floor:.2g} rad (set accuracy.phase_atol to at "
+                f"least that, or leave it out: accuracy.phase holds the phase relative to itself)")
         plan = self._auto_plan
         steps = min(plan.turns * plan.steps_per_turn["lawson8"], plan.turns * plan.steps_per_turn["etdrk4"])
         if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0 and self.c_m > 0:
@@ -350,7 +363,7 @@ class Simulator:
             return  # exact steps
         self._knob_warned.add(method)
         eL, eq = plan.predicted(method)
-        if eL > plan.tol_L or eq > plan.tol_q:
+        if eL > plan.tol_L or eq > plan.plan_q:
             want, val = self._auto_plan.knob(method), plan.knob(method)
             acc = self.scene.accuracy
             accuracy_warning(
@@ -516,7 +529,7 @@ class Simulator:
             lm = lead._seg[1][5] if lead._seg is not None else method
             if lm != method:
                 method, h_max = lm, self._h_for(lm)
-            div = lead.step_div / SHADOW_RATIO[method]
+            div = lead.step_div / (SHADOW_RATIO[method] * self.shadow_mult)
         else:
             div = self.step_div
         if div != 1.0 and math.isfinite(h_max):

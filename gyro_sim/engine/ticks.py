@@ -308,11 +308,20 @@ class TickLoop:
         return bk, law_at, rows, n_log, log_c, log_r
 
     def _follow(self, common: np.ndarray) -> None:
-        """The shadow run follows through the common breaks ``common`` (Runner._follow, none a check) in one call;
-        its steps and the run's count for the error control."""
+        """The shadow runs follow through the common breaks ``common`` (Runner._follow, none a check) in one call
+        each; their steps and the run's count for the error control."""
         r = self.r
-        sim, sh = r.sim, r.shadow
+        sim = r.sim
         seg = sim._seg[1]  # (the run's segment of this chunk)
+        s_steps = self._follow_one(r.shadow, common)
+        s2 = self._follow_one(r.shadow2, common) if r.shadow2 is not None else 0
+        r.control.note_method(seg[5], sim.steps - r._steps_seen, s_steps, exact=seg[4] and sim._free_axis != -1,
+                              stiff=seg[6] > sim.tau_min, shadow2_steps=s2)
+        r._steps_seen = sim.steps
+
+    @staticmethod
+    def _follow_one(sh, common: np.ndarray) -> int:
+        """Advance shadow ``sh`` through ``common`` in one call of :func:`breaks`; returns its steps."""
         sseg = sh._segment()
         phase = sh.phase.copy()
         n, k = common.size, sh.rate.size
@@ -326,9 +335,7 @@ class TickLoop:
         sh.steps += s_steps
         sh.phase = phase
         sh.t = sh._seg_t_end = float(common[-1])
-        r.control.note_method(seg[5], sim.steps - r._steps_seen, s_steps, exact=seg[4] and sim._free_axis != -1,
-                              stiff=seg[6] > sim.tau_min)
-        r._steps_seen = sim.steps
+        return s_steps
 
     def _log(self, times: np.ndarray, cur: np.ndarray, rate: np.ndarray) -> None:
         """The commands of the ticks whose law changed nothing, in the runner's log as apply_commands writes them."""

@@ -168,3 +168,12 @@ def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int) -> tuple[np.ndarra
     swing_s = np.sqrt(np.maximum(np.sum(v * v, axis=-1) - va * va, 0.0))
     swing = 2.0 * np.arctan2(swing_s, np.sqrt(w * w + va * va))
     return swing, twist
+
+
+def nutation_angle_of(q: np.ndarray, L: np.ndarray, axis: int) -> float:
+    """The angle (rad, 0…π) between the body's axis x_axis (q body → case) and L (case frame); 0 for L = 0."""
+    R = quat_to_matrix(np.asarray(q, dtype=float))
+    a = R[:, axis]
+    L = np.asarray(L, dtype=float)
+    c = np.cross(a, L)
+    return math.atan2(float(np.linalg.norm(c)), float(a @ L))

@@ -14,7 +14,7 @@ from gyro_sim.physics.conductor import (ModalModel, g_shell, g_solid_sphere, mod
                                         modal_thin_shell, shell_tau_eff)
 from gyro_sim.physics.constants import MU0
 from gyro_sim.scenes.tolerance import (LEGACY_MODES, MAX_MODES, MODE_SHARE, MODE_TOL_FLOOR, _GRID, field_rates,
-                                      is_legacy, spin_reach, warn)
+                                      is_legacy, planning_attitude, spin_reach, warn)
 
 # --------------------------------------------------------------------------------------------------
 # modal truncation
@@ -122,7 +122,8 @@ def best_tail(kind: str, r2: float, sigma: float, thickness: Optional[float], n:
 
 def mode_tolerances(rtol: float, attitude: Optional[float], om_reach: float, T: float) -> tuple[float, float]:
     """(tol_g, tol_im) of the modal truncation: :data:`MODE_SHARE` of rtol for both; the Im part also within
-    MODE_SHARE × attitude / (Ω_reach T) (the spin phase error ε ∫|Ω − Ω0| dt), where the attitude counts."""
+    MODE_SHARE × attitude / (Ω_reach T) (the spin phase error ε ∫|Ω − Ω0| dt), where the attitude counts
+    (``attitude``: the phases' tolerance, :func:`gyro_sim.scenes.tolerance.planning_attitude`)."""
     tol_g = max(MODE_SHARE * rtol, MODE_TOL_FLOOR)
     tol_im = tol_g
     if attitude is not None and om_reach * T > 0:
@@ -170,7 +171,8 @@ def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bo
     acc = scene.accuracy
     om = spin_reach(scene, T) if reach is None else reach
     slip = field_rates(scene) + om  # (slip_bound, without a second spin_reach)
-    tol_g, tol_im = mode_tolerances(acc.rtol, acc.attitude if attitude else None, om, T)
+    att_plan = planning_attitude(scene, om, T) if attitude else math.inf
+    tol_g, tol_im = mode_tolerances(acc.rtol, att_plan if math.isfinite(att_plan) else None, om, T)
     att_text = "none" if acc.attitude is None else f"{acc.attitude:g} rad"
     if cond is None or scene.torque_model != "lag" or scene.effects.magnetizable is not None:
         return ModePlan(0, False, slip, tol_g, tol_im, 0.0, 0.0, False, True)  # (a magnetizable body: no modes)

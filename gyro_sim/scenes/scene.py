@@ -303,15 +303,26 @@ class Integrator(_Strict):
 
 
 class Accuracy(_Strict):
-    """What a run must hold over its whole duration against the converged solution of the scene's model:
-    ``rtol`` relative on L (max over the run of |L − L_true| / max|L_true|), ``attitude`` absolute on the attitude
-    (rad: the rotation angle between the computed and the true attitude, the spin phase included; not a result
-    where the attitude is not integrated or was averaged out). Defaults 1e-6 and 1e-6 rad
-    (:data:`gyro_sim.accuracy.DEFAULT_RTOL`, ``DEFAULT_ATTITUDE``). The run chooses its eddy modes and step knobs
-    for them and reports its estimated error (gyro_sim/accuracy.py, ``RunResult.error_estimate``)."""
+    """What a run must hold over its whole duration against the converged solution of the scene's model, in terms
+    of what an engineer observes:
+
+    * ``rtol``: relative on L (max over the run of |L − L_true| / max|L_true|): the direction of L and the spin
+      rate with it;
+    * ``attitude`` (rad): the directions of the rotor's axes up to its spin about the symmetry axis (the angle
+      between the computed and the true symmetry axis: nutation and precession); for a body with no symmetry
+      axis (three different moments) the whole attitude;
+    * ``phase``: the spin phase about the symmetry axis, relative to the phase the rotor turns through over the
+      run (an error of 1e-9 of 1e5 rad is 1e-4 rad); ``phase_atol`` (rad): an absolute tolerance on the spin
+      phase instead, on request.
+
+    Defaults 1e-6, 1e-6 rad, 1e-9 (:mod:`gyro_sim.scenes.tolerance`). ``attitude`` and the phase are not results
+    where the attitude is not integrated or was averaged out. The run chooses its eddy modes and step knobs for
+    them and reports its estimated error (``RunResult.error_estimate``; docs/accuracy.md)."""
 
     rtol: real(ge=1e-13, le=0.1) = 1e-6
-    attitude: Optional[real(ge=1e-13, le=10.0)] = 1e-6  # null: no tolerance on the attitude (only rtol)
+    attitude: Optional[real(ge=1e-13, le=10.0)] = 1e-6  # null: no tolerance on the directions (only rtol)
+    phase: Optional[real(ge=1e-15, le=0.1)] = 1e-9  # relative to the phase turned; null: none
+    phase_atol: Optional[real(ge=1e-13, le=1e6)] = None  # rad, absolute; wins over ``phase``
 
 
 class Scene(_Strict):

@@ -8,7 +8,9 @@ from typing import Optional
 
 import numpy as np
 
-from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, is_legacy)
+from gyro_sim.physics.frames import attitude_split, nutation_angle_of
+from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, has_symmetry_axis,
+                                      is_legacy, phase_tolerance, planning_attitude)
 
 # --------------------------------------------------------------------------------------------------
 # steps
@@ -25,7 +27,7 @@ STEP_ERROR = {
     "free": {"order": 8, "L": 0.0, "q": 50.0},
 }
 #: frozen-flow step: the error per turn is about K ε² with ε = rate_change (second order in the step)
-FROZEN_ERROR = {"L": 3e-6, "q": 0.1}
+FROZEN_ERROR = {"L": 3e-6, "q": 1e-2}
 #: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε² with ε = rate_change, K the
 #: frozen-flow step's: at equal rate_change its errors were never larger than the frozen-flow step's on the
 #: quasi-static scenes (the same in L, far smaller in the attitude of a spin-up: third order there), docs/accuracy.md
@@ -43,7 +45,7 @@ STEPS_WARN = 1e8
 SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
 SPT_MAX = 100000  # the scene format's limit of steps_per_turn
 #: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
-RATE_CHANGE_MAX = 5e-4
+RATE_CHANGE_MAX = 2e-4
 QS_RATE_CHANGE_MAX = 1e-2
 RATE_CHANGE_MIN = 1e-9
 
@@ -54,7 +56,9 @@ class StepPlan:
     ``rate_change``, the turns they were chosen for (``turns``: of the fastest rotation over the run;
     ``free_turns``: of the free rotor's body-frame motion), the step tolerances (``tol_L`` relative, ``tol_q``
     rad; inf where the attitude is not integrated), which knobs the scene gave (``explicit``) and the quasi-static
-    flow step's ``rate_change`` (``qs_rate_change``; the scene's ``rate_change`` where it gives one)."""
+    flow step's ``rate_change`` (``qs_rate_change``; the scene's ``rate_change`` where it gives one). ``tol_q`` is
+    the directions' tolerance (the symmetry axis; the whole attitude without one), ``tol_p`` the spin phase's,
+    ``plan_q`` what the error models of the phases are planned for."""
 
     steps_per_turn: dict
     rate_change: float
@@ -64,6 +68,10 @@ class StepPlan:
     tol_q: float
     explicit: frozenset = frozenset()
     qs_rate_change: float = RATE_CHANGE_MAX
+    #: the spin phase's tolerance (rad, absolute, the step share; inf: none or no symmetry axis)
+    tol_p: float = math.inf
+    #: the tolerance the steppers' phase error models are planned for (rad; :func:`planning_attitude`)
+    plan_q: float = math.inf
 
     def knob(self, method: str) -> float:
         """The plan's knob of ``method``: ``rate_change`` (:data:`RATE_KNOB`) or ``steps_per_turn``."""
@@ -112,25 +120,46 @@ def _qs_rate_change_for(turns: float, tol_L: float, tol_q: float) -> float:
     return max(eps, RATE_CHANGE_MIN)
 
 
+def _plan_tolerances(scene, T: float, attitude: bool, omega: float) -> tuple[float, float, float, float]:
+    """(tol_L, tol_q, tol_p, plan_q) of a plan (:data:`STEP_SHARE` of each tolerance): L relative, the directions
+    (rad), the spin phase (rad, absolute over the run) and the phases' planning tolerance (rad; at least
+    :data:`PHASE_REL_MIN` of the phase the run can turn through: double precision holds a phase to ~1e-14 of
+    itself at best)."""
+    acc = scene.accuracy
+    tol_L = STEP_SHARE * acc.rtol
+    if not attitude:
+        return tol_L, math.inf, math.inf, math.inf
+    floor = PHASE_REL_MIN * omega * T
+    tol_q = math.inf if acc.attitude is None else STEP_SHARE * max(acc.attitude, floor)
+    sym = has_symmetry_axis(scene.rotor.inertia)
+    tol_p = STEP_SHARE * max(phase_tolerance(acc, omega, T), floor) if sym else math.inf
+    plan_q = STEP_SHARE * max(planning_attitude(scene, omega, T), floor)
+    return tol_L, tol_q, tol_p, plan_q
+
+
+def _plan_L(tol_L: float, tol_q: float, tol_p: float, omega: float, T: float, sym: bool) -> float:
+    """L's tolerance for the plan: an error δ of |L| turns the spin rate by δ of itself, and the phase drifts by δ
+    Ω T over the run: the spin phase's tolerance over Ω T (a relative phase tolerance: itself, whatever T). Without
+    a symmetry axis the whole attitude drifts so: tol_q over Ω T. The directions of an axisymmetric body drift by
+    sin θ of its precession phase: the error control follows that from the θ it meets."""
+    if not omega * T > 0:
+        return tol_L
+    return min(tol_L, (tol_p if sym else tol_q) / (omega * T))
+
+
 def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) -> StepPlan:
     """The step knobs of a run of T s (:class:`StepPlan`) for the scene's ``accuracy`` (:data:`STEP_SHARE` of it):
     ``omega`` the fastest rate (rad/s) the field steppers resolve over the run, ``omega_free`` the free rotor's
     body-frame rate. Explicit ``integrator.steps_per_turn`` / ``rate_change`` win (the simulator warns where the
     model says they miss the tolerance, for the stepper it runs)."""
-    acc = scene.accuracy
-    tol_L = STEP_SHARE * acc.rtol
-    # the attitude's absolute tolerance, at least PHASE_REL_MIN of the spin phase the run can turn through (double
-    # precision holds the phase to ~1e-14 of itself at best: a tighter one is planned at that floor)
-    tol_q = (STEP_SHARE * max(acc.attitude, PHASE_REL_MIN * omega * T) if attitude and acc.attitude is not None
-             else math.inf)
+    tol_L, tol_q, tol_p, plan_q = _plan_tolerances(scene, T, attitude, omega)
+    sym = has_symmetry_axis(scene.rotor.inertia)
     turns = omega * T / (2 * math.pi)
     free_turns = omega_free * T / (2 * math.pi)
-    # an error of L made early turns the spin rate and the attitude drifts from then on: with L's error growing
-    # through the run, half the attitude's budget allows an L error of tol_q / (Ω T) at the end
-    plan_L = min(tol_L, tol_q / (omega * T)) if omega * T > 0 else tol_L
-    spt = {m: _spt_for(m, free_turns if m == "free" else turns, plan_L, 0.5 * tol_q) for m in STEP_ERROR}
-    eps = _rate_change_for(turns, plan_L, 0.5 * tol_q)
-    eps_qs = _qs_rate_change_for(turns, plan_L, 0.5 * tol_q)
+    plan_L = _plan_L(tol_L, tol_q, tol_p, omega, T, sym)
+    spt = {m: _spt_for(m, free_turns if m == "free" else turns, plan_L, 0.5 * plan_q) for m in STEP_ERROR}
+    eps = _rate_change_for(turns, plan_L, 0.5 * plan_q)
+    eps_qs = _qs_rate_change_for(turns, plan_L, 0.5 * plan_q)
     integ = scene.integrator
     explicit = set()
     if is_legacy():
@@ -143,23 +172,25 @@ def step_plan(scene, T: float, attitude: bool, omega: float, omega_free: float) 
     if integ.rate_change is not None:
         eps = eps_qs = float(integ.rate_change)
         explicit.add("rate_change")
-    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit), qs_rate_change=eps_qs)
+    return StepPlan(spt, eps, turns, free_turns, tol_L, tol_q, frozenset(explicit), qs_rate_change=eps_qs,
+                    tol_p=tol_p, plan_q=plan_q)
 
 
 def auto_plan(plan: StepPlan, scene) -> StepPlan:
     """The plan at the accuracy's own knobs (explicit knobs left out): what ``method: auto`` decides the stepper
     by (the choice follows the physics and the tolerance; the scene's knobs then set the chosen stepper's
     accuracy)."""
+    extra = dict(tol_p=plan.tol_p, plan_q=plan.plan_q)
     if not plan.explicit or "legacy" in plan.explicit:
         return plan if "legacy" not in plan.explicit else StepPlan(
             dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE, plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
-            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE)
+            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE, **extra)
     omT = plan.turns * 2 * math.pi
-    plan_L = min(plan.tol_L, plan.tol_q / omT) if omT > 0 else plan.tol_L
-    tol = (plan_L, 0.5 * plan.tol_q)
+    plan_L = _plan_L(plan.tol_L, plan.tol_q, plan.tol_p, omT, 1.0, has_symmetry_axis(scene.rotor.inertia))
+    tol = (plan_L, 0.5 * plan.plan_q)
     spt = {m: _spt_for(m, plan.free_turns if m == "free" else plan.turns, *tol) for m in STEP_ERROR}
     return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
-                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol))
+                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol), **extra)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -167,7 +198,7 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
 # --------------------------------------------------------------------------------------------------
 #: order of each stepper (Richardson: the error of a run is its difference from a run with steps R times longer
 #: over R^p − 1); the free stepper of an axisymmetric or spherical body is exact
-ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8, "qs_flow": 1}
+ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 1, "free": 8, "qs_flow": 1}
 #: qs_flow (gyro_sim/qs_flow.py) converges at second to third order, but not monotonically: its error terms beat with
 #: the field's ripple (f h mod 2π), and the ratio of its errors at 2h and h measured 1.3 to 13 (docs/accuracy.md);
 #: its stretches are estimated at order 1 (the run's difference from its shadow), as the stiff ETDRK4's below.
@@ -177,6 +208,10 @@ ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 2, "free": 8, "qs_flow": 1}
 #: at order 1 (d/(R − 1): the run's difference from its shadow, an upper bound while the error falls with the step)
 STIFF_ORDER = 1
 STIFF = "etdrk4 (stiff)"
+#: the orders a frozen-flow run's estimate takes from what its three runs show (ErrorControl.order_seen)
+ORDER_SEEN = (1.0, 2.0)
+#: ... where the three runs' step ratios are within this of SHADOW_RATIO (else the fixed order of ORDER)
+ORDER_SEEN_SPREAD = 0.2
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
 SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
@@ -194,19 +229,30 @@ REFINE_MAX = 4.0
 EARLY_RHO = 4.0
 REFINE_MAX_EARLY = 2.0
 COARSEN = 2.0
+#: the PI step control's exponents over the order (Gustafsson 1991; Hairer & Wanner II, IV.2: α = 0.7, β = 0.4)
+PI_ALPHA = 0.7
+PI_BETA = 0.4
 MAX_COARSE = 8.0
 MAX_REFINE = 1e4
+
+
+_EST_KEYS = ("L", "attitude", "steps_L", "steps_attitude", "modes_L", "modes_attitude", "averaged_L", "steps_method",
+             "rtol", "atol", "phase", "steps_phase", "modes_phase", "phase_tol", "round_off")
 
 
 @dataclass
 class ErrorEstimate:
     """A run's estimated error over its whole duration (what ``RunResult.error_estimate`` holds).
 
-    ``L``: relative error of L (max over the run of |ΔL| / max |L|); ``attitude``: rad (NaN where the attitude is
-    not a result: not integrated, or averaged out). Each is the sum of its parts: ``steps_*`` (the steps: a
-    Richardson estimate from the shadow run, ``steps_method`` 'richardson', or the step plan's error model where
-    no shadow ran, 'model'), ``modes_*`` (the eddy modes' truncation bound at the largest slip met) and
-    ``averaged_L`` (the averaged models' O(ε), fidelity auto/averaged). ``rtol``/``atol``: the scene's tolerances.
+    ``L``: relative error of L (max over the run of |ΔL| / max |L|); ``attitude``: rad, the directions of the
+    rotor's axes up to its spin about the symmetry axis (the whole attitude for a body without one); ``phase``:
+    rad, the spin phase about the symmetry axis (NaN where the attitude is not a result: not integrated, or
+    averaged out; the phase also without a symmetry axis). Each is the sum of its parts: ``steps_*`` (the steps:
+    a Richardson estimate from the shadow run, ``steps_method`` 'richardson', or the step plan's error model where
+    no shadow ran, 'model'), ``modes_*`` (the eddy modes' truncation bound at the largest slip met),
+    ``averaged_L`` (the averaged models' O(ε), fidelity auto/averaged) and ``round_off`` (rad: the phases' floor in
+    double precision, in ``attitude`` and ``phase``). ``rtol``/``atol``: the scene's tolerances; ``phase_tol`` the
+    spin phase's in rad (``accuracy.phase`` × the phase turned, or ``phase_atol``).
     """
 
     L: float
@@ -219,16 +265,20 @@ class ErrorEstimate:
     steps_method: str
     rtol: float
     atol: float
+    phase: float = math.nan
+    steps_phase: float = math.nan
+    modes_phase: float = math.nan
+    phase_tol: float = math.nan
+    round_off: float = 0.0
 
     @property
     def met(self) -> bool:
         """Whether the estimate is within the scene's accuracy."""
-        return self.L <= self.rtol and not (self.attitude > self.atol)  # (atol NaN: no attitude tolerance)
+        return (self.L <= self.rtol and not (self.attitude > self.atol)  # (atol NaN: no attitude tolerance)
+                and not (self.phase > self.phase_tol))
 
     def as_dict(self) -> dict:
-        return {k: getattr(self, k) for k in ("L", "attitude", "steps_L", "steps_attitude", "modes_L",
-                                              "modes_attitude", "averaged_L", "steps_method", "rtol", "atol")} | {
-            "met": self.met}
+        return {k: getattr(self, k) for k in _EST_KEYS} | {"met": self.met}
 
     def to_json(self) -> str:
         """The estimate as one line of JSON (NaN as null): the bag's custom_data ``gyro_sim.error_estimate``."""
@@ -242,15 +292,18 @@ class ErrorEstimate:
         import json
 
         d = json.loads(text)
-        keys = ("L", "attitude", "steps_L", "steps_attitude", "modes_L", "modes_attitude", "averaged_L",
-                "steps_method", "rtol", "atol")
-        return cls(**{k: (math.nan if d.get(k) is None else d[k]) for k in keys})
+        return cls(**{k: (math.nan if d.get(k) is None else d[k]) for k in _EST_KEYS
+                      if k in d or k in _EST_KEYS[:10]})
 
     def text(self) -> str:
-        """One line: ``L 3.1e-07 (rtol 1e-06), attitude 2.2e-07 rad (1e-06)``."""
+        """One line: ``L 3.1e-07 (rtol 1e-06), attitude 2.2e-07 rad (1e-06), spin phase 4e-06 rad (1.2e-04)``."""
         att = ("not a result" if not math.isfinite(self.attitude) else f"{self.attitude:.2g} rad"
                + (f" ({self.atol:g})" if math.isfinite(self.atol) else ""))
-        return (f"L {self.L:.2g} (rtol {self.rtol:g}), attitude {att}"
+        ph = ""
+        if math.isfinite(self.phase):
+            ph = f", spin phase {self.phase:.2g} rad" + (f" ({self.phase_tol:.2g})" if math.isfinite(self.phase_tol)
+                                                        else "")
+        return (f"L {self.L:.2g} (rtol {self.rtol:g}), attitude {att}{ph}"
                 + ("" if self.met else ", beyond the scene's accuracy"))
 
 
@@ -272,19 +325,24 @@ class ErrorControl:
     """
 
     def __init__(self, plan: StepPlan, attitude: bool, T: float, adapt: bool, J_min: float = 1.0,
-                 L_bound: float = 0.0):
+                 L_bound: float = 0.0, axis: int = -1):
         self.plan, self.attitude, self.T, self.adapt, self.J_min = plan, attitude, T, adapt, J_min
         self.L_bound = L_bound  # the largest |L| the run can reach (N m s): the scale of L's relative error ahead
+        self.axis = axis  # the body's symmetry axis (frames.symmetry_axis; −1: none, the whole attitude)
         self.checks = np.array(sorted({float(T * f) for f in CHECKS if 0 < T * f < T}))
         self.dL = 0.0  # largest error of L (N m s)
-        self.e_q = 0.0  # rad
+        self.e_q = 0.0  # directions, rad
+        self.e_p = 0.0  # spin phase, rad
         self.L_max = 0.0
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
-        self.prev = None  # (t, |ΔL| now, attitude error now, error of |L| now) at the previous check
+        self.shadow2_steps: dict = {}  # the second shadow's (Runner.shadow2), where one runs
+        self.prev = None  # (t, |ΔL|, direction error, phase error, error of |L|) now, at the previous check
         self.dLn = 0.0
-        self.banked = (0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
-        self.history: list = []  # (t, e_L, e_q, step_div) at each check
+        self.banked = (0.0, 0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
+        self.history: list = []  # (t, e_L, e_q, e_p, step_div) at each check
+        self.p_seen: Optional[float] = None  # the order the three runs showed at the last measure (order_seen)
+        self.rho_prev: Optional[float] = None  # the last check's projected error over its budget (the PI control)
 
     @property
     def denom(self) -> float:
@@ -303,14 +361,37 @@ class ErrorControl:
         return n / acc if acc > 0 else math.inf
 
     def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
-                    stiff: bool = False) -> None:
-        """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
-        with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`)."""
+                    stiff: bool = False, shadow2_steps: int = 0) -> None:
+        """Count a stretch's steps (run, shadow, second shadow) for the Richardson denominator; ``stiff``: an ETDRK4
+        stretch with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`)."""
         if stiff and method == "etdrk4":
             method = STIFF
         if not exact and steps:
             self.weights[method] = self.weights.get(method, 0) + steps
             self.shadow_steps[method] = self.shadow_steps.get(method, 0) + shadow_steps
+            self.shadow2_steps[method] = self.shadow2_steps.get(method, 0) + shadow2_steps
+
+    def order_seen(self, d1: float, d2: float) -> Optional[tuple[float, float]]:
+        """(r, p): the step ratio and the order the run shows where its steps are all frozen-flow steps and a second
+        shadow ran: with e(h) = C h^p, the run's difference from its shadow d1 = C h^p (r^p − 1) and the shadow's
+        from the second d2 = C h^p r^p (r2^p − 1), so d2/d1 ≈ r^p (r ≈ r2). p is held within :data:`ORDER_SEEN`
+        (the frozen-flow step's errors converge at order 1.3 to 2 as measured, not at a fixed one): the estimate
+        d1/(r^p − 1) then neither assumes the order 2 it does not always show (an estimate 2 to 3 times low) nor
+        the order 1 that makes it up to 5 times high and the steps that much shorter. None where that does not
+        apply (the fixed order of :data:`ORDER`)."""
+        k = self.weights.get("frozen_flow", 0)
+        if not k or k < 0.9 * sum(self.weights.values()):
+            return None
+        k1, k2 = self.shadow_steps.get("frozen_flow", 0), self.shadow2_steps.get("frozen_flow", 0)
+        if not (k1 and k2):
+            return None
+        r, r2 = k / k1, k1 / k2
+        nominal = SHADOW_RATIO["frozen_flow"]
+        if abs(r / nominal - 1.0) > ORDER_SEEN_SPREAD or abs(r2 / nominal - 1.0) > ORDER_SEEN_SPREAD:
+            return None  # (steps cut by stops, the run's by its samples: the ratios say little of the order)
+        lo, hi = ORDER_SEEN
+        p = lo if not (d1 > 0 and d2 > 0) else min(hi, max(lo, math.log(d2 / d1) / math.log(math.sqrt(r * r2))))
+        return r, p
 
     @property
     def e_L(self) -> float:
@@ -320,35 +401,56 @@ class ErrorControl:
     def note_L(self, L_norm: float) -> None:
         self.L_max = max(self.L_max, L_norm)
 
-    def _now(self, main, shadow) -> tuple[float, float]:
-        """(|ΔL| N m s, attitude error rad) of the run now from its difference with the shadow; ``self.dLn``: the
-        error of |L| (what turns the spin rate: the attitude drifts at it over J)."""
+    def _now(self, main, shadow, shadow2=None) -> tuple[float, float, float]:
+        """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
+        shadow (:func:`gyro_sim.physics.frames.attitude_split`), each at the order the three runs show where a
+        second shadow ran (:meth:`order_seen`); ``self.dLn``: the error of |L| (what turns the spin and precession
+        rates: the phases drift at it over J)."""
         den = self.denom
         if not math.isfinite(den):
             self.dLn = 0.0
-            return 0.0, 0.0
-        self.dLn = abs(float(np.linalg.norm(main.y[0:3])) - float(np.linalg.norm(shadow.y[0:3]))) / den
-        dL = float(np.linalg.norm(main.y[0:3] - shadow.y[0:3])) / den
-        dq = 0.0
+            return 0.0, 0.0, 0.0
+        L, Ls = main.y[0:3], shadow.y[0:3]
+        d = [abs(float(np.linalg.norm(L)) - float(np.linalg.norm(Ls))), float(np.linalg.norm(L - Ls)), 0.0, 0.0]
+        d2 = None
+        if shadow2 is not None:
+            L2 = shadow2.y[0:3]
+            d2 = [abs(float(np.linalg.norm(Ls)) - float(np.linalg.norm(L2))), float(np.linalg.norm(Ls - L2)), 0.0,
+                  0.0]
         if self.attitude:
-            q, qs = main.y[3:7], shadow.y[3:7]
-            d = min(float(np.linalg.norm(q - qs)), float(np.linalg.norm(q + qs)))
-            dq = 4.0 * math.asin(min(1.0, 0.5 * d)) / den
-        return dL, dq
+            d[2:] = (float(v) for v in attitude_split(main.y[3:7], shadow.y[3:7], self.axis))
+            if d2 is not None:
+                d2[2:] = (float(v) for v in attitude_split(shadow.y[3:7], shadow2.y[3:7], self.axis))
+        out, seen_p = [], []
+        for i, di in enumerate(d):
+            seen = self.order_seen(di, d2[i]) if d2 is not None else None
+            out.append(di / (seen[0] ** seen[1] - 1.0) if seen is not None else di / den)
+            if seen is not None:
+                seen_p.append(seen[1])
+        self.p_seen = min(seen_p) if seen_p else None
+        self.dLn = out[0]
+        return out[1], out[2], out[3]
 
-    def measure(self, main, shadow) -> tuple[float, float, float, float]:
-        """Update the running maxima; returns (|ΔL| now, attitude error now, e_L, e_q)."""
+    def measure(self, main, shadow, shadow2=None) -> tuple[float, float, float, float, float, float]:
+        """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
         self.L_max = max(self.L_max, float(np.linalg.norm(main.y[0:3])))
-        dL, dq = self._now(main, shadow)
+        dL, dq, dp = self._now(main, shadow, shadow2)
         self.dL = max(self.dL, self.banked[0] + dL)
         self.e_q = max(self.e_q, self.banked[1] + dq)
-        return dL, dq, self.e_L, self.e_q
+        self.e_p = max(self.e_p, self.banked[2] + dp)
+        return dL, dq, dp, self.e_L, self.e_q, self.e_p
 
     def bank(self) -> None:
         """Keep the errors so far (the shadow is about to be set to the run's state: a fidelity hand-over)."""
-        self.banked = (self.dL, self.e_q)
+        self.banked = (self.dL, self.e_q, self.e_p)
         self.prev = None
         self.dLn = 0.0
+
+    def sin_theta(self, main) -> float:
+        """sin θ now: the symmetry axis against L (1 without a symmetry axis: the whole attitude drifts)."""
+        if self.axis < 0:
+            return 1.0
+        return math.sin(nutation_angle_of(main.y[3:7], main.y[0:3], self.axis))
 
     def coarsest(self, main, method: str) -> float:
         """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
@@ -364,17 +466,17 @@ class ErrorControl:
         return div
 
     def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,
-              measurable: bool = True) -> Optional[float]:
+              measurable: bool = True, shadow2=None) -> Optional[float]:
         """At a check instant: measure, and return the factor to divide the step by (None: unchanged).
         ``torque_now`` / ``torque_mean``: |N| now and its mean since the previous check (errors are made in
         proportion to the torque: the growth ahead is projected at today's torque); ``measurable``: whether the
         shadow's steps were longer than the run's since the previous check (else the error made was not seen, and
         the step is not made longer)."""
-        dL, dq, e_L, e_q = self.measure(main, shadow)
+        dL, dq, dp, e_L, e_q, e_p = self.measure(main, shadow, shadow2)
         dLn = self.dLn
-        self.history.append((t, e_L, e_q, main.step_div))
-        t0, dL0, dq0, dLn0 = self.prev if self.prev is not None else (0.0, 0.0, 0.0, 0.0)
-        self.prev = (t, dL, dq, dLn)
+        self.history.append((t, e_L, e_q, e_p, main.step_div))
+        t0, dL0, dq0, dp0, dLn0 = self.prev if self.prev is not None else (0.0, 0.0, 0.0, 0.0, 0.0)
+        self.prev = (t, dL, dq, dp, dLn)
         if not self.adapt or method not in ORDER or t <= t0:
             return None
         if not measurable:  # back to a step the shadow can measure against (never coarser here)
@@ -386,23 +488,33 @@ class ErrorControl:
         rate_L = scale * max(dL - dL0, 0.0) / (t - t0)
         new = [rate_L * left / L_ref / plan.tol_L]
         room = [max(AIM - self.dL / L_ref / plan.tol_L, 0.1 * AIM)]
-        if self.attitude and math.isfinite(plan.tol_q):
-            # the error of |L| turns the spin rate: the attitude drifts at it over J from now on
-            drift, drift0 = dLn / self.J_min, dLn0 / self.J_min
+        if self.attitude:
+            # the error of |L| turns the spin rate (and the precession rate): the spin phase drifts at it over J from
+            # now on, the directions by sin θ of that (the whole attitude without a symmetry axis)
             rate_Ln = scale * max(dLn - dLn0, 0.0) / (t - t0)
-            committed = e_q + drift * left
-            # growth of the attitude error beyond the drift of the L error there was (the steps' own phase error)
-            rate_q = scale * max((dq - dq0) / (t - t0) - 0.5 * (drift + drift0), 0.0)
-            new.append((rate_q * left + rate_Ln / self.J_min * 0.5 * left * left) / plan.tol_q)
-            room.append(max(AIM - committed / plan.tol_q, 0.1 * AIM))
+            sth = self.sin_theta(main)
+            for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, sth), (plan.tol_p, e_p, dp, dp0, 1.0)):
+                if not math.isfinite(tol):
+                    continue
+                drift, drift0 = k * dLn / self.J_min, k * dLn0 / self.J_min
+                committed = e + drift * left
+                # growth beyond the drift of the L error there was (the steps' own phase error)
+                rate = scale * max((d - d0) / (t - t0) - 0.5 * (drift + drift0), 0.0)
+                new.append((rate * left + k * rate_Ln / self.J_min * 0.5 * left * left) / tol)
+                room.append(max(AIM - committed / tol, 0.1 * AIM))
         rho = max(n / r for n, r in zip(new, room))
         settled = all(r > 0.1 * AIM for r in room)  # (no longer steps once the budget is spent)
-        p = ORDER[method]
+        # the order the step's error rate follows: the frozen-flow step's as its three runs show it (else ORDER's)
+        p = self.p_seen if method == "frozen_flow" and self.p_seen is not None else ORDER[method]
         early = t < self.T / 16 * (1 - 1e-12)
+        rho_prev, self.rho_prev = self.rho_prev, rho
+        # PI control (Gustafsson 1991; Hairer & Wanner, IV.2): the factor follows the error's ratio to its target
+        # and, damped, its trend since the previous check, so a run does not swing between too long and too short
+        pi = (rho / 0.6) ** (PI_ALPHA / p) * ((rho / rho_prev) ** (PI_BETA / p) if rho_prev and rho > 0 else 1.0)
         if rho > (EARLY_RHO if early else 1.0):  # (early checks project a short stretch far: they act on more)
-            f = min(REFINE_MAX_EARLY if early else REFINE_MAX, (rho / 0.6) ** (1.0 / p))
+            f = min(REFINE_MAX_EARLY if early else REFINE_MAX, max(pi, 1.0))
         elif rho < 0.3 and settled and not early:  # (coarser only on the regular checks' evidence)
-            f = max(1.0 / COARSEN, (max(rho, 1e-300) / 0.6) ** (1.0 / p))
+            f = max(1.0 / COARSEN, min(pi, 1.0))
         else:
             return None
         div = min(MAX_REFINE, max(1.0 / MAX_COARSE, self.coarsest(main, method), main.step_div * f))

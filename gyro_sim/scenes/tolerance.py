@@ -14,9 +14,15 @@ from gyro_sim.physics.constants import MU0
 
 #: default relative tolerance on L over the whole run
 DEFAULT_RTOL = 1e-6
-#: default absolute tolerance on the attitude (rad, the rotation angle between computed and true attitude) over
-#: the whole run
+#: default absolute tolerance on the directions of the rotor's axes (rad: the angle between the computed and the
+#: true symmetry axis; the whole rotation angle for a body without symmetry axis) over the whole run
 DEFAULT_ATTITUDE = 1e-6
+#: default tolerance on the spin phase about the symmetry axis, relative to the phase the rotor turns through
+#: (docs/accuracy.md, "Why these defaults")
+DEFAULT_PHASE = 1e-9
+#: the nutation angle a plan assumes at least (sin θ): the direction of the symmetry axis errs by sin θ times the
+#: error of its precession phase, which the steppers make as they make the spin phase's
+PLAN_SIN_THETA_MIN = 0.1
 #: share of each tolerance given to the eddy modes' truncation
 MODE_SHARE = 0.25
 #: share given to the steps
@@ -164,3 +170,39 @@ def slip_bound(scene, T: float) -> float:
     return field_rates(scene) + spin_reach(scene, T)
 
 
+
+
+# --------------------------------------------------------------------------------------------------
+# the attitude's tolerances: directions and spin phase
+# --------------------------------------------------------------------------------------------------
+def has_symmetry_axis(J) -> bool:
+    """Whether principal moments J have two equal (an axisymmetric or isotropic body: a spin phase apart)."""
+    J0, J1, J2 = (float(v) for v in J)
+    return J0 == J1 or J1 == J2 or J0 == J2
+
+
+def phase_tolerance(acc, om: float, T: float) -> float:
+    """Absolute tolerance (rad) on the spin phase of a run that turns at up to ``om`` rad/s for T s:
+    ``accuracy.phase_atol`` where given, else ``accuracy.phase`` × ``om`` T (the phase turned), never tighter than
+    ``accuracy.attitude`` (a phase error below the directions' tolerance is nothing an engineer sees: a spin-up from
+    rest turns through little phase at first); inf where none."""
+    if acc.phase_atol is not None:
+        return float(acc.phase_atol)
+    if acc.phase is None:
+        return math.inf
+    return max(float(acc.phase) * max(om * T, 0.0), 0.0 if acc.attitude is None else float(acc.attitude))
+
+
+def planning_attitude(scene, om: float, T: float) -> float:
+    """The tolerance (rad) on the phases the steppers err in (spin and precession: their error models count both
+    alike) that holds a run's attitude tolerances: the spin phase's (:func:`phase_tolerance`), and the directions'
+    through the precession phase, whose error turns the symmetry axis by sin θ of itself (θ taken at least
+    :data:`PLAN_SIN_THETA_MIN`). A body without symmetry axis: ``accuracy.attitude`` (the whole attitude). inf
+    where neither is asked for. The plan's first guess: the run's error control measures each and corrects."""
+    acc = scene.accuracy
+    J = scene.rotor.inertia
+    if not has_symmetry_axis(J):
+        return math.inf if acc.attitude is None else float(acc.attitude)
+    s = max(abs(math.sin(float(scene.initial.theta))), PLAN_SIN_THETA_MIN)
+    direc = math.inf if acc.attitude is None else float(acc.attitude) / s
+    return min(direc, phase_tolerance(acc, om, T))
