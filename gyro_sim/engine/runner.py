@@ -15,8 +15,7 @@ from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
 from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
-from gyro_sim.scenes.accuracy import (R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl, ErrorEstimate,
-                                      is_legacy)
+from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
 from gyro_sim.scenes.scene import Scene, SceneError
 from gyro_sim.scenes.tolerance import phase_tolerance
 
@@ -65,16 +64,10 @@ class Runner:
         self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
                                     J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound,
                                     axis=symmetry_axis(self.sim.J))
-        self.shadow = self.shadow2 = None
+        self.shadow = None
         if estimate:
             self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
             self.shadow.leader = self.sim
-            if self.sim.may_take_frozen_flow():
-                # a second shadow, its steps SHADOW_RATIO times the first's (1/16 of the run's work): the three give
-                # the order the frozen-flow step shows on this run (ErrorControl.order_seen)
-                self.shadow2 = Simulator(scene, attitude, horizon=H, quiet=True)
-                self.shadow2.leader = self.sim
-                self.shadow2.shadow_mult = SHADOW_RATIO["frozen_flow"]
         self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
         self._ck = 0  # the next check
         self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
@@ -192,9 +185,8 @@ class Runner:
             if name not in self.sim.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
         self.sim.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
-        for sh in (self.shadow, self.shadow2):
-            if sh is not None:
-                sh.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+        if self.shadow is not None:
+            self.shadow.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
@@ -241,14 +233,9 @@ class Runner:
             method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
             s0 = sh.steps
             sh.advance(tb)
-            s2 = 0
-            if self.shadow2 is not None:
-                s2 = self.shadow2.steps
-                self.shadow2.advance(tb)
-                s2 = self.shadow2.steps - s2
             self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
                                      exact=free and sim._free_axis != -1,
-                                     stiff=h > sim.tau_min, shadow2_steps=s2)
+                                     stiff=h > sim.tau_min)
             self._steps_seen = sim.steps
         else:
             return
@@ -261,13 +248,12 @@ class Runner:
             n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
             self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
-            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, shadow2=self.shadow2)
+            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
             if f is not None:
                 sim.step_div *= f
             if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
-                for s in (sim, sh, self.shadow2):
-                    if s is not None:
-                        s.replan()
+                sim.replan()
+                sh.replan()
 
     def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate)."""
@@ -294,15 +280,13 @@ class Runner:
         if self.shadow is None:
             return
         sim = self.sim
-        self.control.measure(sim, self.shadow, self.shadow2)
+        sh = self.shadow
+        self.control.measure(sim, sh)
         self.control.bank()
-        for sh in (self.shadow, self.shadow2):
-            if sh is None:
-                continue
-            sh.y[:] = sim.y
-            sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
-            sh._nu_max = sim._nu_max
-            sh.replan()
+        sh.y[:] = sim.y
+        sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
+        sh._nu_max = sim._nu_max
+        sh.replan()
 
     def error_estimate(self) -> ErrorEstimate:
         """The run's estimated error so far (over the whole duration once it is done): the steps' (from the shadow,
@@ -311,7 +295,7 @@ class Runner:
         ctl = self.control
         L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
         if self.shadow is not None:
-            sL, sq, sp, how = *ctl.measure(sim, self.shadow, self.shadow2)[3:], "richardson"
+            sL, sq, sp, how = *ctl.measure(sim, self.shadow)[3:], "richardson"
             # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
             # closer than the step): the plan's model at the knob they ran
             for m, k in ctl.weights.items():

@@ -35,7 +35,6 @@ class Simulator:
         # run follows its ``leader``: the same stepper, steps SHADOW_RATIO times the leader's
         self.step_div = 1.0
         self.leader: Optional["Simulator"] = None
-        self.shadow_mult = 1.0  # a second shadow's steps: SHADOW_RATIO × this times the leader's (Runner.shadow2)
         self.attitude = integrates_attitude(scene, attitude)
         J = scene.inertia
         self.J = J
@@ -308,12 +307,6 @@ class Simulator:
         self._check_knob(m)
         return m, self._max_step(False, m)
 
-    def may_take_frozen_flow(self) -> bool:
-        """Whether a field step of this run can be the frozen-flow step (axisymmetric or isotropic rotor, no effect,
-        the eddy-mode model, ``method`` auto or frozen_flow): the runs whose error control takes a second shadow."""
-        return (frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0 and self.c_m > 0
-                and self.scene.torque_model == "lag" and self.scene.integrator.method in ("auto", "frozen_flow"))
-
     def _qs_applies(self) -> bool:
         """Whether ``auto`` takes the quasi-static flow step (gyro_sim/qs_flow.py) where it would take frozen_flow:
         on the quasi-static torque model (not in the old defaults' runs, gyro_sim.accuracy.legacy). Its step is as
@@ -529,7 +522,7 @@ class Simulator:
             lm = lead._seg[1][5] if lead._seg is not None else method
             if lm != method:
                 method, h_max = lm, self._h_for(lm)
-            div = lead.step_div / (SHADOW_RATIO[method] * self.shadow_mult)
+            div = lead.step_div / SHADOW_RATIO[method]
         else:
             div = self.step_div
         if div != 1.0 and math.isfinite(h_max):

@@ -308,15 +308,14 @@ class TickLoop:
         return bk, law_at, rows, n_log, log_c, log_r
 
     def _follow(self, common: np.ndarray) -> None:
-        """The shadow runs follow through the common breaks ``common`` (Runner._follow, none a check) in one call
-        each; their steps and the run's count for the error control."""
+        """The shadow run follows through the common breaks ``common`` (Runner._follow, none a check) in one call;
+        its steps and the run's count for the error control."""
         r = self.r
         sim = r.sim
         seg = sim._seg[1]  # (the run's segment of this chunk)
         s_steps = self._follow_one(r.shadow, common)
-        s2 = self._follow_one(r.shadow2, common) if r.shadow2 is not None else 0
         r.control.note_method(seg[5], sim.steps - r._steps_seen, s_steps, exact=seg[4] and sim._free_axis != -1,
-                              stiff=seg[6] > sim.tau_min, shadow2_steps=s2)
+                              stiff=seg[6] > sim.tau_min)
         r._steps_seen = sim.steps
 
     @staticmethod

@@ -208,10 +208,6 @@ ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 1, "free": 8, "qs_flow": 1}
 #: at order 1 (d/(R − 1): the run's difference from its shadow, an upper bound while the error falls with the step)
 STIFF_ORDER = 1
 STIFF = "etdrk4 (stiff)"
-#: the orders a frozen-flow run's estimate takes from what its three runs show (ErrorControl.order_seen)
-ORDER_SEEN = (1.0, 2.0)
-#: ... where the three runs' step ratios are within this of SHADOW_RATIO (else the fixed order of ORDER)
-ORDER_SEEN_SPREAD = 0.2
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
 SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
@@ -336,12 +332,10 @@ class ErrorControl:
         self.L_max = 0.0
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
-        self.shadow2_steps: dict = {}  # the second shadow's (Runner.shadow2), where one runs
         self.prev = None  # (t, |ΔL|, direction error, phase error, error of |L|) now, at the previous check
         self.dLn = 0.0
         self.banked = (0.0, 0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
         self.history: list = []  # (t, e_L, e_q, e_p, step_div) at each check
-        self.p_seen: Optional[float] = None  # the order the three runs showed at the last measure (order_seen)
         self.rho_prev: Optional[float] = None  # the last check's projected error over its budget (the PI control)
 
     @property
@@ -361,37 +355,14 @@ class ErrorControl:
         return n / acc if acc > 0 else math.inf
 
     def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
-                    stiff: bool = False, shadow2_steps: int = 0) -> None:
-        """Count a stretch's steps (run, shadow, second shadow) for the Richardson denominator; ``stiff``: an ETDRK4
-        stretch with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`)."""
+                    stiff: bool = False) -> None:
+        """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
+        with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`)."""
         if stiff and method == "etdrk4":
             method = STIFF
         if not exact and steps:
             self.weights[method] = self.weights.get(method, 0) + steps
             self.shadow_steps[method] = self.shadow_steps.get(method, 0) + shadow_steps
-            self.shadow2_steps[method] = self.shadow2_steps.get(method, 0) + shadow2_steps
-
-    def order_seen(self, d1: float, d2: float) -> Optional[tuple[float, float]]:
-        """(r, p): the step ratio and the order the run shows where its steps are all frozen-flow steps and a second
-        shadow ran: with e(h) = C h^p, the run's difference from its shadow d1 = C h^p (r^p − 1) and the shadow's
-        from the second d2 = C h^p r^p (r2^p − 1), so d2/d1 ≈ r^p (r ≈ r2). p is held within :data:`ORDER_SEEN`
-        (the frozen-flow step's errors converge at order 1.3 to 2 as measured, not at a fixed one): the estimate
-        d1/(r^p − 1) then neither assumes the order 2 it does not always show (an estimate 2 to 3 times low) nor
-        the order 1 that makes it up to 5 times high and the steps that much shorter. None where that does not
-        apply (the fixed order of :data:`ORDER`)."""
-        k = self.weights.get("frozen_flow", 0)
-        if not k or k < 0.9 * sum(self.weights.values()):
-            return None
-        k1, k2 = self.shadow_steps.get("frozen_flow", 0), self.shadow2_steps.get("frozen_flow", 0)
-        if not (k1 and k2):
-            return None
-        r, r2 = k / k1, k1 / k2
-        nominal = SHADOW_RATIO["frozen_flow"]
-        if abs(r / nominal - 1.0) > ORDER_SEEN_SPREAD or abs(r2 / nominal - 1.0) > ORDER_SEEN_SPREAD:
-            return None  # (steps cut by stops, the run's by its samples: the ratios say little of the order)
-        lo, hi = ORDER_SEEN
-        p = lo if not (d1 > 0 and d2 > 0) else min(hi, max(lo, math.log(d2 / d1) / math.log(math.sqrt(r * r2))))
-        return r, p
 
     @property
     def e_L(self) -> float:
@@ -401,40 +372,27 @@ class ErrorControl:
     def note_L(self, L_norm: float) -> None:
         self.L_max = max(self.L_max, L_norm)
 
-    def _now(self, main, shadow, shadow2=None) -> tuple[float, float, float]:
+    def _now(self, main, shadow) -> tuple[float, float, float]:
         """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
-        shadow (:func:`gyro_sim.physics.frames.attitude_split`), each at the order the three runs show where a
-        second shadow ran (:meth:`order_seen`); ``self.dLn``: the error of |L| (what turns the spin and precession
-        rates: the phases drift at it over J)."""
+        shadow (:func:`gyro_sim.physics.frames.attitude_split`); ``self.dLn``: the error of |L| (what turns the
+        spin and precession rates: the phases drift at it over J)."""
         den = self.denom
         if not math.isfinite(den):
             self.dLn = 0.0
             return 0.0, 0.0, 0.0
         L, Ls = main.y[0:3], shadow.y[0:3]
-        d = [abs(float(np.linalg.norm(L)) - float(np.linalg.norm(Ls))), float(np.linalg.norm(L - Ls)), 0.0, 0.0]
-        d2 = None
-        if shadow2 is not None:
-            L2 = shadow2.y[0:3]
-            d2 = [abs(float(np.linalg.norm(Ls)) - float(np.linalg.norm(L2))), float(np.linalg.norm(Ls - L2)), 0.0,
-                  0.0]
+        self.dLn = abs(float(np.linalg.norm(L)) - float(np.linalg.norm(Ls))) / den
+        dL = float(np.linalg.norm(L - Ls)) / den
+        dq = dp = 0.0
         if self.attitude:
-            d[2:] = (float(v) for v in attitude_split(main.y[3:7], shadow.y[3:7], self.axis))
-            if d2 is not None:
-                d2[2:] = (float(v) for v in attitude_split(shadow.y[3:7], shadow2.y[3:7], self.axis))
-        out, seen_p = [], []
-        for i, di in enumerate(d):
-            seen = self.order_seen(di, d2[i]) if d2 is not None else None
-            out.append(di / (seen[0] ** seen[1] - 1.0) if seen is not None else di / den)
-            if seen is not None:
-                seen_p.append(seen[1])
-        self.p_seen = min(seen_p) if seen_p else None
-        self.dLn = out[0]
-        return out[1], out[2], out[3]
+            d, p = attitude_split(main.y[3:7], shadow.y[3:7], self.axis)
+            dq, dp = float(d) / den, float(p) / den
+        return dL, dq, dp
 
-    def measure(self, main, shadow, shadow2=None) -> tuple[float, float, float, float, float, float]:
+    def measure(self, main, shadow) -> tuple[float, float, float, float, float, float]:
         """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
         self.L_max = max(self.L_max, float(np.linalg.norm(main.y[0:3])))
-        dL, dq, dp = self._now(main, shadow, shadow2)
+        dL, dq, dp = self._now(main, shadow)
         self.dL = max(self.dL, self.banked[0] + dL)
         self.e_q = max(self.e_q, self.banked[1] + dq)
         self.e_p = max(self.e_p, self.banked[2] + dp)
@@ -466,13 +424,13 @@ class ErrorControl:
         return div
 
     def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,
-              measurable: bool = True, shadow2=None) -> Optional[float]:
+              measurable: bool = True) -> Optional[float]:
         """At a check instant: measure, and return the factor to divide the step by (None: unchanged).
         ``torque_now`` / ``torque_mean``: |N| now and its mean since the previous check (errors are made in
         proportion to the torque: the growth ahead is projected at today's torque); ``measurable``: whether the
         shadow's steps were longer than the run's since the previous check (else the error made was not seen, and
         the step is not made longer)."""
-        dL, dq, dp, e_L, e_q, e_p = self.measure(main, shadow, shadow2)
+        dL, dq, dp, e_L, e_q, e_p = self.measure(main, shadow)
         dLn = self.dLn
         self.history.append((t, e_L, e_q, e_p, main.step_div))
         t0, dL0, dq0, dp0, dLn0 = self.prev if self.prev is not None else (0.0, 0.0, 0.0, 0.0, 0.0)
@@ -504,8 +462,7 @@ class ErrorControl:
                 room.append(max(AIM - committed / tol, 0.1 * AIM))
         rho = max(n / r for n, r in zip(new, room))
         settled = all(r > 0.1 * AIM for r in room)  # (no longer steps once the budget is spent)
-        # the order the step's error rate follows: the frozen-flow step's as its three runs show it (else ORDER's)
-        p = self.p_seen if method == "frozen_flow" and self.p_seen is not None else ORDER[method]
+        p = ORDER[method]
         early = t < self.T / 16 * (1 - 1e-12)
         rho_prev, self.rho_prev = self.rho_prev, rho
         # PI control (Gustafsson 1991; Hairer & Wanner, IV.2): the factor follows the error's ratio to its target
