@@ -32,19 +32,22 @@ def advanced(name: str, T: float, integrator: dict, **ov) -> Simulator:
     return sim
 
 
-def test_default_scene_two_seconds_and_second_order():
-    """Default scene, 2 s from rest (1000 field turns): the default rate_change (1e-4: 356 steps, 5.6 ms each,
-    2.8 field turns) against lawson8 at 96 steps per turn; and the order: the step 4x shorter gives ~16x less."""
+def test_default_scene_two_seconds_and_the_third_pass():
+    """Default scene, 2 s from rest (1000 field turns): rate_change 1e-4 (356 steps, 5.6 ms each, 2.8 field turns)
+    against lawson8 at 96 steps per turn. The two-pass step of before erred by 2.5e-7 in the attitude (its spin
+    phase, second order: 16x more for a 4x longer step); the third pass at the mean of L right to O(h³) takes that
+    term out (3.0e-8 measured), and what is left falls about as the step (3.6x for 4x): the error control estimates
+    frozen-flow stretches at order 1 (step_control.ORDER)."""
     ref = advanced("spinup_thin_shell", 2.0, {"method": "lawson8", "steps_per_turn": 96})
     sims = {eps: advanced("spinup_thin_shell", 2.0, {"method": "frozen_flow", "rate_change": eps})
             for eps in (4e-4, 1e-4)}
     assert sims[1e-4].steps < 400
     eL, eq = final_error(sims[1e-4], ref)
     report("frozen_flow (rate_change 1e-4), default scene 2 s, L", eL, 1e-9)
-    report("frozen_flow (rate_change 1e-4), default scene 2 s, attitude q", eq, 1e-6)
+    report("frozen_flow (rate_change 1e-4), default scene 2 s, attitude q", eq, 1e-7)
     ratio = final_error(sims[4e-4], ref)[1] / eq
-    print(f"  attitude error ratio for a 4x longer step: {ratio:.1f} (second order: 16)")
-    assert 8.0 < ratio < 32.0
+    print(f"  attitude error ratio for a 4x longer step: {ratio:.1f} (first order: 4)")
+    assert 2.0 < ratio < 32.0
 
 
 def test_solid_sphere_ten_modes():
