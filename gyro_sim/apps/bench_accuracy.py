@@ -14,8 +14,10 @@
 * the **tolerance sweep**: ``accuracy: {rtol: tol, attitude: tol}`` for tol = 1e-3 … 1e-10 (full mode; 1e-3, 1e-6,
   1e-9 in quick mode), full fidelity.
 
-Each run's achieved error is the largest over the output samples of |L − L_ref| / max |L_ref| and of the attitude's
-rotation angle from the reference (rad; not for runs that averaged the fast phases out), beside the run's own
+Each run's achieved error is the largest over the output samples of |L − L_ref| / max |L_ref|, of the angle between
+its symmetry axis and the reference's (the scene's ``attitude``; the whole rotation angle for a triaxial body) and
+of its spin phase's (rad; :func:`gyro_sim.physics.frames.attitude_split`; not for runs that averaged the fast phases
+out), beside the run's own
 estimate (``RunResult.error_estimate``), their ratio and the run's CPU time. Quick mode runs each scene over
 min(duration, 2 s) (the plan is made for that horizon).
 """
@@ -51,6 +53,9 @@ class AccRow:
     q: float = math.nan  # achieved, rad (NaN: not a result)
     est_L: float = math.nan
     est_q: float = math.nan
+    phase: float = math.nan  # achieved spin phase error, rad (NaN: no symmetry axis, or not a result)
+    est_phase: float = math.nan
+    phase_tol: float = math.nan  # rad, as the run reports it (accuracy.phase × the phase turned, or phase_atol)
     cpu: float = math.nan
     steps: int = 0
     note: str = ""
@@ -58,7 +63,7 @@ class AccRow:
 
     @property
     def met(self) -> bool:
-        return bool(self.L <= self.rtol and not (self.q > self.attitude_tol))
+        return bool(self.L <= self.rtol and not (self.q > self.attitude_tol) and not (self.phase > self.phase_tol))
 
     @property
     def verdict(self) -> str:
@@ -86,17 +91,26 @@ class AccResults:
     refs: dict = field(default_factory=dict)  # scene → {method, steps_per_turn, modes, ref_error_L, ref_error_q, cpu}
 
 
-def _errors(r, ref) -> tuple[float, float]:
+def _errors(r, ref, split: bool = False):
+    """(L relative, attitude rad) of run ``r`` against ``ref`` over their common samples; ``split``: (L, directions,
+    spin phase) as the scene's tolerances count them (frames.attitude_split; NaN where not a result)."""
+    from gyro_sim.physics.frames import attitude_split, symmetry_axis
+
     n = min(len(r.t), len(ref.t))
     if not np.allclose(r.t[:n], ref.t[:n], rtol=0, atol=1e-9):
         raise RuntimeError("bench_accuracy: the run's samples are not the reference's")
     Lmax = float(np.max(np.linalg.norm(ref.L[:n], axis=1)))
     eL = float(np.max(np.linalg.norm(r.L[:n] - ref.L[:n], axis=1)) / Lmax) if Lmax > 0 else 0.0
-    eq = math.nan
+    eq = ep = math.nan
     if getattr(r, "attitude", True) and not getattr(r, "averaged_segments", None) and np.all(np.isfinite(r.q[:n])):
-        d = np.minimum(np.linalg.norm(r.q[:n] - ref.q[:n], axis=1), np.linalg.norm(r.q[:n] + ref.q[:n], axis=1))
-        eq = float(np.max(4.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0))))
-    return eL, eq
+        ax = symmetry_axis(r.scene.rotor.inertia)
+        if split:
+            d, p = attitude_split(r.q[:n], ref.q[:n], ax)
+            eq, ep = float(np.max(d)), (float(np.max(p)) if ax >= 0 else math.nan)
+        else:
+            d = np.minimum(np.linalg.norm(r.q[:n] - ref.q[:n], axis=1), np.linalg.norm(r.q[:n] + ref.q[:n], axis=1))
+            eq = float(np.max(4.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0))))
+    return (eL, eq, ep) if split else (eL, eq)
 
 
 def _load(name: str, T: float, **over):
@@ -179,11 +193,11 @@ def _one(name: str, T: float, what: str, fidelity: str, ref, over: dict, legacy_
     except SceneError as exc:
         row.note = f"refused: {str(exc)[:80]}"
         return row
-    row.L, row.q = _errors(r, ref)
+    row.L, row.q, row.phase = _errors(r, ref, split=True)
     row.steps = int(r.steps)
     e = r.error_estimate
     if e is not None:
-        row.est_L, row.est_q = e.L, e.attitude
+        row.est_L, row.est_q, row.est_phase, row.phase_tol = e.L, e.attitude, e.phase, e.phase_tol
         if e.steps_method != "richardson":
             row.note = (row.note + "; " if row.note else "") + f"estimate: {e.steps_method}"
     if getattr(r, "averaged_segments", None):
@@ -234,14 +248,15 @@ def markdown_lines(acc: AccResults) -> list[str]:
              "(its difference from the same at half the steps): achieved errors near it are the reference's, and "
              "a tolerance below it is not measured (met: `–`).", ""]
     lines += ["### Scenes as shipped", "",
-              "| scene | T s | fidelity | stated rtol / attitude | achieved L | achieved attitude | estimate L | "
-              "estimate attitude | met | CPU s | steps | ref | note |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| scene | T s | fidelity | stated rtol / attitude / phase rad | achieved L | achieved attitude | "
+              "achieved phase | estimate L | estimate attitude | estimate phase | met | CPU s | steps | ref | note |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in acc.rows:
         if r.what in ("as shipped", "old defaults"):
             label = r.fidelity if r.what == "as shipped" else "full, old defaults"
-            lines.append(f"| {r.scene} | {r.horizon:g} | {label} | {_f(r.rtol, 'g')} / {_f(r.attitude_tol, 'g')} | "
-                         f"{_f(r.L)} | {_f(r.q)} | {_f(r.est_L)} | {_f(r.est_q)} | "
+            lines.append(f"| {r.scene} | {r.horizon:g} | {label} | {_f(r.rtol, 'g')} / {_f(r.attitude_tol, 'g')} / "
+                         f"{_f(r.phase_tol)} | {_f(r.L)} | {_f(r.q)} | {_f(r.phase)} | {_f(r.est_L)} | {_f(r.est_q)} | "
+                         f"{_f(r.est_phase)} | "
                          f"{'–' if r.note.startswith('refused') else r.verdict} | {_f(r.cpu, '.3g')} | "
                          f"{r.steps} | {_f(r.ref_error, '.1e')} | {r.note} |")
     lines += ["", "### Tolerance sweep (full fidelity; rtol = attitude = tol)", "",
@@ -257,7 +272,8 @@ def markdown_lines(acc: AccResults) -> list[str]:
 def csv_rows(acc: AccResults) -> list[dict]:
     return [{"scene": r.scene, "horizon_s": r.horizon, "what": r.what, "fidelity": r.fidelity, "rtol": r.rtol,
              "attitude_tol": r.attitude_tol, "error_L": r.L, "error_attitude": r.q, "estimate_L": r.est_L,
-             "estimate_attitude": r.est_q, "met": r.verdict, "cpu_s": r.cpu, "steps": r.steps,
+             "estimate_attitude": r.est_q, "error_phase": r.phase, "estimate_phase": r.est_phase,
+             "phase_tol": r.phase_tol, "met": r.verdict, "cpu_s": r.cpu, "steps": r.steps,
              "ref_error": r.ref_error, "note": r.note} for r in acc.rows]
 
 

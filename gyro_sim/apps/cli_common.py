@@ -52,6 +52,9 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
         tol_q = s("accuracy_attitude")
         att = (f"attitude {eq:.2g} rad" + (f" ({tol_q:g})" if tol_q is not None and tol_q == tol_q else "")
                if eq is not None and eq == eq else "attitude not a result")
+        ep, tol_p = s("error_phase"), s("accuracy_phase")
+        if ep is not None and ep == ep:
+            att += f", spin phase {ep:.2g} rad" + (f" ({tol_p:.2g})" if tol_p is not None and tol_p == tol_p else "")
         rows.append(("estimated error", f"L {s('error_L'):.2g}" + (f" (rtol {s('accuracy_rtol'):g})"
                                                                   if s("accuracy_rtol") else "") + f", {att}"
                      + ("" if s("accuracy_met") is not False else "  (beyond the scene's accuracy)")))

@@ -156,9 +156,9 @@ class RunResult:
 def error_summary(est: Optional[ErrorEstimate]) -> dict:
     """The summary's error keys of an estimate (NaN and None where the run has none)."""
     if est is None:
-        return {"error_L": math.nan, "error_attitude": math.nan, "accuracy_met": None}
-    return {"error_L": est.L, "error_attitude": est.attitude, "accuracy_met": est.met,
-            "accuracy_rtol": est.rtol, "accuracy_attitude": est.atol}
+        return {"error_L": math.nan, "error_attitude": math.nan, "error_phase": math.nan, "accuracy_met": None}
+    return {"error_L": est.L, "error_attitude": est.attitude, "error_phase": est.phase, "accuracy_met": est.met,
+            "accuracy_rtol": est.rtol, "accuracy_attitude": est.atol, "accuracy_phase": est.phase_tol}
 
 
 # --- views: DataFrame, Dataset, repr --------------------------------------------------------------------

@@ -23,11 +23,15 @@ Format (all keys but ``rotor``, ``duration`` optional)::
         thickness: 0.001             # r2 − r1, m (thin_shell, shell)
         conductivity: 2.5e7          # σ, S/m
     torque_model: lag                # none | quasi_static | lag  (physics.md §3)
-    accuracy:                        # what the run must hold over its whole duration (gyro_sim/accuracy.py)
+    accuracy:                        # what the run must hold over its whole duration (docs/accuracy.md)
       rtol: 1.0e-6                   # relative tolerance on L (default 1e-6)
-      attitude: 1.0e-6               # absolute tolerance on the attitude, rad (default 1e-6; the rotation
-                                     # angle between the computed and the true attitude, spin phase included;
-                                     # null: none, only rtol)
+      attitude: 1.0e-6               # the directions of the rotor's axes, rad (default 1e-6: the angle between
+                                     # the computed and the true symmetry axis; the whole attitude for a body
+                                     # with three different moments; null: none, only rtol)
+      phase: 1.0e-9                  # the spin phase about the symmetry axis, relative to the phase turned
+                                     # (default 1e-9; never tighter than attitude; null: none)
+      phase_atol: null               # rad: an absolute tolerance on the spin phase instead (it costs: the
+                                     # phase error grows with the turns)
     modes: null                      # eddy modes kept by the lag model of a solid sphere / shell; default:
                                      # chosen from accuracy and the largest slip the run can meet (with or
                                      # without the static tail term); a number given here wins (a warning
