@@ -453,11 +453,12 @@ class BenchConfig:
     ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
     ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
+    estimate: bool = True  # the estimate part (bench_estimate): each case's error estimate against its true error
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
     startup: bool = False  # the startup part (bench_scaling): new processes' import and first-run times
     startup_baseline: Optional[str] = None  # a source tree of the code before, timed beside this one
     sweep: bool = False  # the sweep part (bench_scaling): runs/s in-process, on 1 and 2 Dask workers
-    only: Optional[str] = None  # run this part alone ("accuracy", "ticks", "startup", "sweep")
+    only: Optional[str] = None  # run this part alone ("accuracy", "estimate", "ticks", "startup", "sweep")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -509,6 +510,7 @@ class Results:
     startup: list = field(default_factory=list)  # dicts of the startup part (bench_scaling)
     sweep: list = field(default_factory=list)  # dicts of the sweep part (bench_scaling)
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
+    estimate: Optional[object] = None  # the estimate part (bench_estimate.EstResults)
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""

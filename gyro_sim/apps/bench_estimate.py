@@ -35,7 +35,7 @@ from typing import Optional
 
 import numpy as np
 
-__all__ = ["CASES", "Case", "EstRow", "estimate_part", "markdown_lines", "csv_rows", "headline"]
+__all__ = ["CASES", "Case", "EstRow", "estimate_part", "markdown_lines", "csv_rows", "write_csv", "headline"]
 
 REF_SPT = 64  # lawson8 steps per turn of the reference (doubled once: the check)
 REF_SPT_ETD = 2048  # ETDRK4 where lawson8 would need more than 1024 (a stiff mode)
@@ -480,6 +480,20 @@ def csv_rows(est) -> list:
              "est_phase": r.est_phase, "semantics": r.semantics, "ratio_L": r.ratio_L, "ratio_attitude": r.ratio_att,
              "ratio_phase": r.ratio_phase, "verdict": r.verdict, "ref_L": r.ref_L, "ref_attitude": r.ref_att,
              "ref": r.ref_how, "steps_method": r.method, "note": r.note} for r in est.rows]
+
+
+def write_csv(res, path) -> None:
+    """DIR/estimate.csv: one line per case (nothing where the part did not run)."""
+    import csv
+
+    est = getattr(res, "estimate", None)
+    if est is None or not est.rows:
+        return
+    rows = csv_rows(est)
+    with open(path, "w", newline="") as fh:
+        wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        wr.writeheader()
+        wr.writerows(rows)
 
 
 def headline(est) -> list:
