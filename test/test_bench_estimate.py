@@ -50,7 +50,7 @@ def test_estimate_part_rows_on_cheap_cases(tmp_path):
         rows = list(csv.DictReader(fh))
     assert [r["case"] for r in rows] == [c.label for c in CHEAP]
     assert {"true_L", "true_direction", "true_phase", "est_L", "est_attitude", "est_phase", "verdict"} <= set(rows[0])
-    assert be.headline(out)[0].startswith(f"estimate: {len(CHEAP)} cases")
+    assert be.headline(out)[0].startswith(f"estimate: {len(CHEAP)} cases:")
 
 
 def test_verdict_rules():
