@@ -472,10 +472,11 @@ def markdown_lines(res) -> list:
             "with the true spin phase" if sem == {"split"} else
             "the estimate's attitude is the whole attitude (the spin phase included), compared with the true whole "
             "rotation angle" if sem == {"whole"} else "mixed estimate semantics")
-    bad = [r for r in est.rows if r.verdict != "ok"]
-    after = [f"{len(est.rows)} cases, {len(est.rows) - len(bad)} ok ({what}). True errors are the max over the output "
-             "samples against a converged reference (`ref`: its own error, L and attitude); a ratio is estimate / "
-             "true. A component within 3x the reference's own error is judged only for `under`."]
+    after = headline(est)[:1] + ["", f"Semantics: {what}. True errors are the max over the output samples against a "
+             "converged reference (`ref`: its own error, L and attitude: the difference of the last two references, "
+             "or the round-off of the Jacobi solution's phase); a ratio is estimate / true. A component whose true "
+             f"error is within {REF_FLOOR:g}x the reference's own error (or below {ROUNDOFF:g} in L) is not judged "
+             "(`at floor`); `floor`: no component could be."]
     return _table("## Error estimates against true errors (issue 28)",
                   "case | T s | rtol / attitude | steps | CPU s | true L | true direction | true phase | "
                   "true whole | est. L | est. attitude | est. phase | ratio L | ratio attitude | ratio phase | "
