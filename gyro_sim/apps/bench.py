@@ -644,7 +644,7 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
     cfg.sweep = cfg.sweep and not args.no_sweep
     cfg.startup_baseline = args.startup_baseline
     cfg.accuracy = not args.no_accuracy
-    cfg.estimate = not args.no_estimate
+    cfg.estimate = cfg.estimate and not args.no_estimate
     cfg.only = args.only
     if args.accuracy_scenes:
         cfg.accuracy_scenes = tuple(args.accuracy_scenes)

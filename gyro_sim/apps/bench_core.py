@@ -453,7 +453,7 @@ class BenchConfig:
     ros: bool = False  # the ros part (bench_ros): first runs, lockstep over DDS, real-time latency
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
     ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
-    estimate: bool = True  # the estimate part (bench_estimate): each case's error estimate against its true error
+    estimate: bool = False  # the estimate part (bench_estimate): each case's error estimate against its true error
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
     startup: bool = False  # the startup part (bench_scaling): new processes' import and first-run times
     startup_baseline: Optional[str] = None  # a source tree of the code before, timed beside this one
@@ -471,7 +471,8 @@ def quick_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
     --no-accuracy on 2026-11-25, docs/benchmark.md)."""
     return BenchConfig(mode="quick", scenes=tuple(scenes), default_horizon=0.2,
                        horizon={"spinup_thin_shell": 0.2, "spinup_solid_sphere": 0.2},
-                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True, startup=True, sweep=True)
+                       spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True, startup=True, sweep=True,
+                       estimate=True)
 
 
 def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
@@ -481,7 +482,7 @@ def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
                        horizon={"spinup_thin_shell": 2.0, "spinup_solid_sphere": 2.0},
                        spt_ref=3072, long_horizon_scenes=("spinup_thin_shell",), long_spt_ref=1536,
                        mode_horizon=10.0, mode_baseline_horizon=0.1, spinup_duration=1200.0,
-                       min_wall=0.3, max_reps=5, ros=True, startup=True, sweep=True)
+                       min_wall=0.3, max_reps=5, ros=True, startup=True, sweep=True, estimate=True)
 
 
 # ----------------------------------------------------------------------------------------
