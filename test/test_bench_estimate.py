@@ -7,7 +7,8 @@ import math
 from types import SimpleNamespace
 
 from gyro_sim.apps import bench_estimate as be
-from gyro_sim.apps.bench import BenchConfig, build_parser, full_config, quick_config, Results
+from gyro_sim.apps.bench import (BenchConfig, build_parser, full_config, quick_config,
+                                  Results)
 from gyro_sim.apps.bench_report import markdown, write_outputs
 
 CHEAP = [
