@@ -73,7 +73,8 @@ def test_registered_in_bench():
     args = build_parser().parse_args(["--only", "estimate", "--out", "/tmp/x"])
     assert args.only == "estimate"
     assert build_parser().parse_args(["--no-estimate"]).no_estimate
-    assert quick_config().estimate and full_config().estimate and not BenchConfig(mode="quick").estimate  # (a part's own tests)
+    # on in quick and full mode, off in a bare configuration (a smoke test of the other parts)
+    assert quick_config().estimate and full_config().estimate and not BenchConfig(mode="quick").estimate
     assert be.markdown_lines(SimpleNamespace(estimate=None)) == []
 
 
