@@ -534,6 +534,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
+    if cfg.only == "estimate":
+        from gyro_sim.apps.bench_estimate import estimate_part
+
+        estimate_part(res, cfg)
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     if cfg.only == "ticks":
         from gyro_sim.apps.bench_ticks import output_rate_part, ticks_part
 
@@ -577,6 +584,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         from gyro_sim.apps.bench_accuracy import accuracy_part
 
         accuracy_part(res, cfg.mode == "quick", list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
+    if cfg.estimate:
+        from gyro_sim.apps.bench_estimate import estimate_part
+
+        estimate_part(res, cfg)
     res.wall_total = time.perf_counter() - w0
     write_outputs(res, Path(out))
     return res
@@ -602,12 +613,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-ros", action="store_true", help="skip the ros part (nodes over DDS, first runs)")
     p.add_argument("--no-accuracy", action="store_true",
                    help="skip the accuracy part (every built-in scene against the accuracy it states)")
+    p.add_argument("--no-estimate", action="store_true",
+                   help="skip the estimate part (each case's error estimate against its true error)")
     p.add_argument("--no-startup", action="store_true", help="skip the startup part (new processes' import times)")
     p.add_argument("--no-sweep", action="store_true", help="skip the sweep part (runs/s on 1 and 2 Dask workers)")
     p.add_argument("--startup-baseline", metavar="DIR",
                    help="a source tree of the code before (e.g. git archive of a commit): its start-up is timed beside "
                         "this code's, in the same run")
-    p.add_argument("--only", choices=["accuracy", "ticks", "startup", "sweep"], help="run this part alone")
+    p.add_argument("--only", choices=["accuracy", "estimate", "ticks", "startup", "sweep"],
+                   help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")
     return p
@@ -630,6 +644,7 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
     cfg.sweep = cfg.sweep and not args.no_sweep
     cfg.startup_baseline = args.startup_baseline
     cfg.accuracy = not args.no_accuracy
+    cfg.estimate = cfg.estimate and not args.no_estimate
     cfg.only = args.only
     if args.accuracy_scenes:
         cfg.accuracy_scenes = tuple(args.accuracy_scenes)
@@ -643,6 +658,11 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
         from gyro_sim.apps.bench_accuracy import headline as acc_headline
 
         for line in acc_headline(res.accuracy):
+            print("  " + line)
+    if res.estimate is not None:
+        from gyro_sim.apps.bench_estimate import headline as est_headline
+
+        for line in est_headline(res.estimate):
             print("  " + line)
     print(f"wrote {args.out / 'bench.md'}, {args.out / 'bench.csv'}, {args.out / 'work_precision.png'} "
           f"({res.wall_total:.1f} s)")

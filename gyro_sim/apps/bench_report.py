@@ -142,6 +142,9 @@ def write_outputs(res: Results, out: Path) -> None:
             wr = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["scene"])
             wr.writeheader()
             wr.writerows(rows)
+    from gyro_sim.apps.bench_estimate import write_csv as estimate_csv
+
+    estimate_csv(res, out / "estimate.csv")
     (out / "bench.md").write_text(markdown(res))
     if res.rows:
         plot_work_precision(res, out / "work_precision.png")
@@ -288,6 +291,9 @@ def markdown(res: Results) -> str:
         from gyro_sim.apps.bench_accuracy import markdown_lines
 
         L += markdown_lines(res.accuracy)
+    from gyro_sim.apps.bench_estimate import markdown_lines as estimate_markdown
+
+    L += estimate_markdown(res)
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"
