@@ -57,7 +57,7 @@ def test_the_accuracy_section_takes_phase_and_phase_atol():
 def _errors(r, ref):
     Lm = float(np.max(np.linalg.norm(ref.L, axis=1)))
     eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1))) / Lm
-    d, p = attitude_split(r.q, ref.q, symmetry_axis(r.scene.rotor.inertia))
+    d, p = attitude_split(r.q, ref.q, symmetry_axis(r.scene.rotor.inertia), r.L, ref.L)
     return eL, float(np.max(d)), float(np.max(p))
 
 

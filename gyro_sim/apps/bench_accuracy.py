@@ -105,7 +105,7 @@ def _errors(r, ref, split: bool = False):
     if getattr(r, "attitude", True) and not getattr(r, "averaged_segments", None) and np.all(np.isfinite(r.q[:n])):
         ax = symmetry_axis(r.scene.rotor.inertia)
         if split:
-            d, p = attitude_split(r.q[:n], ref.q[:n], ax)
+            d, p = attitude_split(r.q[:n], ref.q[:n], ax, r.L[:n], ref.L[:n])
             eq, ep = float(np.max(d)), (float(np.max(p)) if ax >= 0 else math.nan)
         else:
             d = np.minimum(np.linalg.norm(r.q[:n] - ref.q[:n], axis=1), np.linalg.norm(r.q[:n] + ref.q[:n], axis=1))

@@ -264,7 +264,7 @@ def _errors(L, q, L_ref, q_ref, axis: int) -> tuple:
         return eL, math.nan, math.nan, math.nan
     qn = q / np.linalg.norm(q, axis=1)[:, None]
     qr = q_ref / np.linalg.norm(q_ref, axis=1)[:, None]
-    d, ph = attitude_split(qn, qr, axis)
+    d, ph = attitude_split(qn, qr, axis, L, L_ref)
     whole, _ = attitude_split(qn, qr, -1)
     return eL, float(np.max(d)), (float(np.max(ph)) if axis >= 0 else math.nan), float(np.max(whole))
 

@@ -248,7 +248,8 @@ class Runner:
             n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
             self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
-            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas)
+            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, turned=self._turned,
+                                   accuracy=self.scene.accuracy)
             if f is not None:
                 sim.step_div *= f
             if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)

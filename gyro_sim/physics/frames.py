@@ -143,14 +143,25 @@ def symmetry_axis(J) -> int:
     return -1
 
 
-def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """Split the difference of two attitudes (unit quaternions (..., 4), body → case) into what an engineer
-    observes and the spin phase: ``(direction, phase)`` in rad.
+#: below this sin θ the precession phase's error counts in proportion (sin θ / this): the axis then barely moves
+#: off L, and the angle of its projection on the plane normal to L says little
+PRECESSION_SIN_MIN = 1e-2
 
-    ``direction``: the angle between the body's symmetry axis x_axis in the two attitudes (the directions of the
-    rotor's axes up to its spin about that axis); ``phase``: the twist about the symmetry axis of the relative
-    rotation q1⁻¹ ⊗ q2 (swing–twist decomposition), i.e. the error of the spin phase. ``axis`` −1 (triaxial: no
-    symmetry axis): ``direction`` is the whole rotation angle between them and ``phase`` is 0."""
+
+def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int, L1=None, L2=None) -> tuple[np.ndarray, np.ndarray]:
+    """Split the difference of two attitudes (unit quaternions (..., 4), body → case) into what an engineer
+    observes from the case and the fast phases: ``(direction, phase)`` in rad.
+
+    Without L (``L1``/``L2`` None): ``direction`` is the angle between the body's symmetry axis x_axis in the two
+    attitudes and ``phase`` the twist about that axis of the relative rotation q1⁻¹ ⊗ q2 (swing–twist).
+
+    With the kinetic moments L1, L2 (case frame, (..., 3)), the symmetry axis is seen as the rotor shows it: a
+    cone about L. ``direction`` = the angle between L1 and L2 plus the difference of the nutation angles θ (the
+    cone's axis and half-angle); ``phase`` = the larger of the spin phase's error (the twist) and the precession
+    phase's (the angle between the two axes' projections on the plane normal to L, in proportion below
+    :data:`PRECESSION_SIN_MIN` of sin θ): both are phases the rotor turns through at about its spin rate.
+
+    ``axis`` −1 (no symmetry axis): ``direction`` is the whole rotation angle between them and ``phase`` 0."""
     q1 = np.asarray(q1, dtype=float)
     q2 = np.asarray(q2, dtype=float)
     w1, v1 = q1[..., 0], q1[..., 1:]
@@ -162,18 +173,28 @@ def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int) -> tuple[np.ndarra
         whole = 2.0 * np.arctan2(np.linalg.norm(v, axis=-1), np.abs(w))
         return whole, np.zeros_like(whole)
     va = v[..., axis]
-    # twist angle about the axis; the swing's angle is the angle between the axis and its image
     twist = 2.0 * np.arctan2(va, w)
     twist = np.abs((twist + np.pi) % (2.0 * np.pi) - np.pi)
-    swing_s = np.sqrt(np.maximum(np.sum(v * v, axis=-1) - va * va, 0.0))
-    swing = 2.0 * np.arctan2(swing_s, np.sqrt(w * w + va * va))
-    return swing, twist
+    if L1 is None or L2 is None:
+        # the swing's angle is the angle between the axis and its image
+        swing_s = np.sqrt(np.maximum(np.sum(v * v, axis=-1) - va * va, 0.0))
+        swing = 2.0 * np.arctan2(swing_s, np.sqrt(w * w + va * va))
+        return swing, twist
+    a1 = quat_to_matrix(q1)[..., :, axis]
+    a2 = quat_to_matrix(q2)[..., :, axis]
+    L1 = np.asarray(L1, dtype=float)
+    L2 = np.asarray(L2, dtype=float)
+    dL = _angle(L1, L2)
+    th1, th2 = _angle(a1, L1), _angle(a2, L2)
+    l2 = L2 / np.maximum(np.linalg.norm(L2, axis=-1, keepdims=True), 1e-300)
+    u1 = a1 - np.sum(a1 * l2, axis=-1, keepdims=True) * l2
+    u2 = a2 - np.sum(a2 * l2, axis=-1, keepdims=True) * l2
+    dpsi = _angle(u1, u2)
+    s = np.abs(np.sin(th2))
+    prec = dpsi * np.minimum(s / PRECESSION_SIN_MIN, 1.0)
+    return dL + np.abs(th1 - th2), np.maximum(twist, prec)
 
 
-def nutation_angle_of(q: np.ndarray, L: np.ndarray, axis: int) -> float:
-    """The angle (rad, 0…π) between the body's axis x_axis (q body → case) and L (case frame); 0 for L = 0."""
-    R = quat_to_matrix(np.asarray(q, dtype=float))
-    a = R[:, axis]
-    L = np.asarray(L, dtype=float)
-    c = np.cross(a, L)
-    return math.atan2(float(np.linalg.norm(c)), float(a @ L))
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The angle (rad, 0…π) between vectors a and b (..., 3), row by row (0 where either is zero)."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))

@@ -8,7 +8,7 @@ from typing import Optional
 
 import numpy as np
 
-from gyro_sim.physics.frames import attitude_split, nutation_angle_of
+from gyro_sim.physics.frames import attitude_split
 from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, has_symmetry_axis,
                                       is_legacy, phase_tolerance, planning_attitude)
 
@@ -219,7 +219,7 @@ R_MEASURABLE = 1.3
 AIM = 0.5
 #: a run refines its step by at most this factor at a check, coarsens it by at most COARSEN, and keeps its step
 #: within [1/MAX_COARSE, MAX_REFINE] of the plan's
-REFINE_MAX = 4.0
+REFINE_MAX = 2.0
 #: at the early checks (before T/16) the step is made shorter only where the projected new error is this many times
 #: the budget, by at most REFINE_MAX_EARLY: they project a short stretch over the whole run
 EARLY_RHO = 4.0
@@ -385,7 +385,7 @@ class ErrorControl:
         dL = float(np.linalg.norm(L - Ls)) / den
         dq = dp = 0.0
         if self.attitude:
-            d, p = attitude_split(main.y[3:7], shadow.y[3:7], self.axis)
+            d, p = attitude_split(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
             dq, dp = float(d) / den, float(p) / den
         return dL, dq, dp
 
@@ -404,12 +404,6 @@ class ErrorControl:
         self.prev = None
         self.dLn = 0.0
 
-    def sin_theta(self, main) -> float:
-        """sin θ now: the symmetry axis against L (1 without a symmetry axis: the whole attitude drifts)."""
-        if self.axis < 0:
-            return 1.0
-        return math.sin(nutation_angle_of(main.y[3:7], main.y[0:3], self.axis))
-
     def coarsest(self, main, method: str) -> float:
         """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
         if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
@@ -424,7 +418,7 @@ class ErrorControl:
         return div
 
     def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,
-              measurable: bool = True) -> Optional[float]:
+              measurable: bool = True, turned: Optional[float] = None, accuracy=None) -> Optional[float]:
         """At a check instant: measure, and return the factor to divide the step by (None: unchanged).
         ``torque_now`` / ``torque_mean``: |N| now and its mean since the previous check (errors are made in
         proportion to the torque: the growth ahead is projected at today's torque); ``measurable``: whether the
@@ -440,6 +434,7 @@ class ErrorControl:
         if not measurable:  # back to a step the shadow can measure against (never coarser here)
             return 1.0 / main.step_div if main.step_div < 1.0 else None
         plan, left = self.plan, self.T - t
+        early = t < self.T / 16 * (1 - 1e-12)
         L_ref = max(self.L_max, self.L_bound, 1e-300)
         scale = min(torque_now / torque_mean, 1.0) if torque_mean > 0 else 1.0
         # L: what is made and what the steps will add at the present rate
@@ -447,23 +442,33 @@ class ErrorControl:
         new = [rate_L * left / L_ref / plan.tol_L]
         room = [max(AIM - self.dL / L_ref / plan.tol_L, 0.1 * AIM)]
         if self.attitude:
-            # the error of |L| turns the spin rate (and the precession rate): the spin phase drifts at it over J from
-            # now on, the directions by sin θ of that (the whole attitude without a symmetry axis)
+            # the error of |L| turns the spin and precession rates: the phases drift at it over J from now on (the
+            # whole attitude without a symmetry axis; the cone of an axisymmetric rotor's axis does not drift so)
             rate_Ln = scale * max(dLn - dLn0, 0.0) / (t - t0)
-            sth = self.sin_theta(main)
-            for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, sth), (plan.tol_p, e_p, dp, dp0, 1.0)):
+            sth = 1.0 if self.axis < 0 else 0.0
+            tol_p = plan.tol_p
+            if (turned is not None and accuracy is not None and accuracy.phase_atol is None and math.isfinite(tol_p)
+                    and not early):
+                # a relative phase tolerance follows the phase the run turns: so far, and ahead at today's rate (the
+                # plan's took the fastest rate the run can reach over all of it; the early checks, where a spin-up
+                # has turned little, keep the plan's)
+                om_now = float(np.linalg.norm(main.y[0:3])) / self.J_min
+                tol_p = min(tol_p, STEP_SHARE * phase_tolerance(accuracy, 1.0, turned + om_now * left))
+            for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, sth), (tol_p, e_p, dp, dp0, 1.0)):
                 if not math.isfinite(tol):
                     continue
                 drift, drift0 = k * dLn / self.J_min, k * dLn0 / self.J_min
                 committed = e + drift * left
                 # growth beyond the drift of the L error there was (the steps' own phase error)
                 rate = scale * max((d - d0) / (t - t0) - 0.5 * (drift + drift0), 0.0)
-                new.append((rate * left + k * rate_Ln / self.J_min * 0.5 * left * left) / tol)
+                # (the drift the new L error will start, quadratic in the time left, only on the regular checks'
+                # evidence: early in a spin-up the error of |L| grows fast for a while and then stays)
+                grow = 0.0 if early else k * rate_Ln / self.J_min * 0.5 * left * left
+                new.append((rate * left + grow) / tol)
                 room.append(max(AIM - committed / tol, 0.1 * AIM))
         rho = max(n / r for n, r in zip(new, room))
         settled = all(r > 0.1 * AIM for r in room)  # (no longer steps once the budget is spent)
         p = ORDER[method]
-        early = t < self.T / 16 * (1 - 1e-12)
         rho_prev, self.rho_prev = self.rho_prev, rho
         # PI control (Gustafsson 1991; Hairer & Wanner, IV.2): the factor follows the error's ratio to its target
         # and, damped, its trend since the previous check, so a run does not swing between too long and too short

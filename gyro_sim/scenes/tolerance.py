@@ -20,9 +20,6 @@ DEFAULT_ATTITUDE = 1e-6
 #: default tolerance on the spin phase about the symmetry axis, relative to the phase the rotor turns through
 #: (docs/accuracy.md, "Why these defaults")
 DEFAULT_PHASE = 1e-9
-#: the nutation angle a plan assumes at least (sin θ): the direction of the symmetry axis errs by sin θ times the
-#: error of its precession phase, which the steppers make as they make the spin phase's
-PLAN_SIN_THETA_MIN = 0.1
 #: share of each tolerance given to the eddy modes' truncation
 MODE_SHARE = 0.25
 #: share given to the steps
@@ -194,15 +191,14 @@ def phase_tolerance(acc, om: float, T: float) -> float:
 
 
 def planning_attitude(scene, om: float, T: float) -> float:
-    """The tolerance (rad) on the phases the steppers err in (spin and precession: their error models count both
-    alike) that holds a run's attitude tolerances: the spin phase's (:func:`phase_tolerance`), and the directions'
-    through the precession phase, whose error turns the symmetry axis by sin θ of itself (θ taken at least
-    :data:`PLAN_SIN_THETA_MIN`). A body without symmetry axis: ``accuracy.attitude`` (the whole attitude). inf
-    where neither is asked for. The plan's first guess: the run's error control measures each and corrects."""
+    """The tolerance (rad) on the phases the steppers err in (the spin phase and the precession phase of the
+    symmetry axis about L: their error models count both alike) that holds a run's attitude tolerances: the spin
+    phase's (:func:`phase_tolerance`; the cone of the axis about L, which ``attitude`` holds, the steppers keep far
+    closer: the error control measures it). A body without symmetry axis: ``accuracy.attitude`` (the whole
+    attitude). inf where neither is asked for. The plan's first guess: the run's error control measures each and
+    corrects."""
     acc = scene.accuracy
     J = scene.rotor.inertia
     if not has_symmetry_axis(J):
         return math.inf if acc.attitude is None else float(acc.attitude)
-    s = max(abs(math.sin(float(scene.initial.theta))), PLAN_SIN_THETA_MIN)
-    direc = math.inf if acc.attitude is None else float(acc.attitude) / s
-    return min(direc, phase_tolerance(acc, om, T))
+    return phase_tolerance(acc, om, T)
