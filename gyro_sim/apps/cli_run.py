@@ -123,6 +123,10 @@ def _cmd_run(args) -> int:
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem
+    if not args.force:  # the step budget, before any work (a bag, a live server, the nodes)
+        bad = _over_budget(scene, args.duration, ros=args.ros)
+        if bad:
+            return _error(bad)
     if args.ros:
         return _run_ros(args, scene, name)
     from gyro_sim.compiled.compile_watch import announce_compiles
@@ -148,11 +152,12 @@ def _cmd_run(args) -> int:
             # streamed: the bag is written as the run goes (a signal or a full disk leaves it closed with
             # everything up to then); it integrates the attitude whatever output.attitude says (/gyro/imu needs it)
             # (keep_bytes=0: the summary and the plot need only its preview, so memory stays flat)
-            result = record_run(scene, args.record, duration=args.duration, on_samples=on_samples, keep_bytes=0)
+            result = record_run(scene, args.record, duration=args.duration, on_samples=on_samples, keep_bytes=0,
+                                force=args.force)
         else:
             with sigterm_as_interrupt():
                 # --live: the attitude is integrated whatever output.attitude says (/tf and /gyro/imu need it)
-                result = simulate.run(scene, duration=args.duration, on_samples=on_samples,
+                result = simulate.run(scene, duration=args.duration, on_samples=on_samples, force=args.force,
                                       **({"attitude": True} if live is not None else {}))
         if live is not None:
             try:
@@ -193,6 +198,25 @@ def _cmd_run(args) -> int:
     return EXIT_OK
 
 
+def _over_budget(scene, duration, ros: bool = False):
+    """The one line refusing a run whose plan exceeds the step budget (gyro_sim/engine/budget.py), or None. The
+    in-process runs check it again as they start (the same plan); the ROS simulator node too (its ``force``)."""
+    from gyro_sim.engine.budget import check_budget
+    from gyro_sim.engine.model import controller_period
+    from gyro_sim.engine.simulator import Simulator
+    from gyro_sim.scenes.scene import SceneError
+
+    T = float(duration or scene.duration)
+    try:
+        # (the node integrates the attitude, and ticks at least every DEFAULT_CONTROL_PERIOD without a controller)
+        sim = Simulator(scene, attitude=True if ros else None, horizon=T, quiet=True)
+        period = controller_period(scene) or (0.01 if ros else None)
+        check_budget(sim, T, period)
+    except SceneError as exc:
+        return str(exc)
+    return None
+
+
 def _signal_name(status: int) -> str:
     import signal
 
@@ -230,7 +254,7 @@ def _run_ros(args, scene, name) -> int:
     bag = args.record or Path(args.out) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
     src = scene.source or args.scene
     code = launch(src, mode=args.mode, record=str(bag), duration=args.duration, rate_factor=args.rate_factor,
-                  with_controller=scene.controller is not None)
+                  with_controller=scene.controller is not None, force=args.force)
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
