@@ -123,12 +123,13 @@ def _cmd_run(args) -> int:
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem
-    if not args.force:  # the step budget, before any work (a bag, a live server, the nodes)
-        bad = _over_budget(scene, args.duration, ros=args.ros)
-        if bad:
-            return _error(bad)
     if args.ros:
+        if not args.force:  # the step budget, before the nodes start (in-process: the Runner refuses, before the bag)
+            bad = _over_budget(scene, args.duration)
+            if bad:
+                return _error(bad)
         return _run_ros(args, scene, name)
+    force = {"force": True} if args.force else {}
     from gyro_sim.compiled.compile_watch import announce_compiles
 
     announce_compiles()  # one line where numba compiles (a first use), before the long pause it explains
@@ -153,11 +154,11 @@ def _cmd_run(args) -> int:
             # everything up to then); it integrates the attitude whatever output.attitude says (/gyro/imu needs it)
             # (keep_bytes=0: the summary and the plot need only its preview, so memory stays flat)
             result = record_run(scene, args.record, duration=args.duration, on_samples=on_samples, keep_bytes=0,
-                                force=args.force)
+                                **force)
         else:
             with sigterm_as_interrupt():
                 # --live: the attitude is integrated whatever output.attitude says (/tf and /gyro/imu need it)
-                result = simulate.run(scene, duration=args.duration, on_samples=on_samples, force=args.force,
+                result = simulate.run(scene, duration=args.duration, on_samples=on_samples, **force,
                                       **({"attitude": True} if live is not None else {}))
         if live is not None:
             try:
@@ -198,9 +199,9 @@ def _cmd_run(args) -> int:
     return EXIT_OK
 
 
-def _over_budget(scene, duration, ros: bool = False):
-    """The one line refusing a run whose plan exceeds the step budget (gyro_sim/engine/budget.py), or None. The
-    in-process runs check it again as they start (the same plan); the ROS simulator node too (its ``force``)."""
+def _over_budget(scene, duration):
+    """The one line refusing a ``--ros`` run whose plan exceeds the step budget (gyro_sim/engine/budget.py), or None,
+    checked here before the nodes start (the simulator node checks it too, its ``force`` parameter)."""
     from gyro_sim.engine.budget import check_budget
     from gyro_sim.engine.model import controller_period
     from gyro_sim.engine.simulator import Simulator
@@ -208,9 +209,9 @@ def _over_budget(scene, duration, ros: bool = False):
 
     T = float(duration or scene.duration)
     try:
-        # (the node integrates the attitude, and ticks at least every DEFAULT_CONTROL_PERIOD without a controller)
-        sim = Simulator(scene, attitude=True if ros else None, horizon=T, quiet=True)
-        period = controller_period(scene) or (0.01 if ros else None)
+        # (the node integrates the attitude, and ticks every DEFAULT_CONTROL_PERIOD without a controller)
+        sim = Simulator(scene, attitude=True, horizon=T, quiet=True)
+        period = controller_period(scene) or 0.01
         check_budget(sim, T, period)
     except SceneError as exc:
         return str(exc)

@@ -57,11 +57,14 @@ class Runner:
         # the accuracy plan is made for the run's duration (``horizon``: another, e.g. a re-run of an interrupted
         # bag planned for its whole duration)
         H = T if horizon is None else float(horizon)
-        self.sim = Simulator(scene, attitude, horizon=H)
-        # the step budget (gyro_sim/engine/budget.py): a plan beyond it is refused before any work, unless forced
+        self.sim = Simulator(scene, attitude, horizon=H, warn_plan=False)
+        # the step budget (gyro_sim/engine/budget.py): a plan beyond it is refused before any work, unless forced (in
+        # one line: the plan's warnings follow once it has passed)
         self.period = control_period or controller_period(scene)
         if not force:
             check_budget(self.sim, T, self.period)
+        if not is_legacy():
+            self.sim._warn_plan(self.sim._rates[0])
         # the error control and its shadow run (gyro_sim/accuracy.py); checks at fixed fractions of the horizon
         plan = self.sim.step_plan
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)

@@ -14,8 +14,8 @@ from gyro_sim.engine.model import (FROZEN_FLOW_COST, _case_flag, _initial_attitu
                                    integrates_attitude, lawson8_cost, stator_triad)
 from gyro_sim.physics.conductor import DEFAULT_N_MODES, conductor_model
 from gyro_sim.physics.frames import euler_angles, quat_to_matrix
-from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan, field_rates,
-                                      is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
+from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan,
+                                      field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
 from gyro_sim.scenes.scene import Scene
 
@@ -37,7 +37,7 @@ class Simulator:
     """
 
     def __init__(self, scene: Scene, attitude: Optional[bool] = None, horizon: Optional[float] = None,
-                 quiet: bool = False):
+                 quiet: bool = False, warn_plan: bool = True):
         self.scene = scene
         self.quiet = quiet  # no accuracy warnings (a shadow run: gyro_sim.accuracy.ErrorControl)
         # the step is the plan's divided by step_div (the run's error control changes it at its checks); a shadow
@@ -152,8 +152,8 @@ class Simulator:
         self.step_plan = step_plan(scene, self.horizon, self.attitude, om_plan, om_free)
         self._auto_plan = auto_plan(self.step_plan, scene)
         self._knob_warned: set = set()
-        if not quiet and not is_legacy():
-            self._warn_plan(om_plan)
+        if not quiet and not is_legacy() and warn_plan:  # (warn_plan False: the caller warns, _warn_plan, once the
+            self._warn_plan(om_plan)                     # step budget has passed the plan: Runner)
 
     # --- named views of the state -------------------------------------------------------------
     @property
