@@ -138,6 +138,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--fidelity", choices=("full", "averaged", "auto"), default=None,
                      help="model fidelity instead of the scene's (in-process only; gyro_sim/fidelity.py)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
+    run.add_argument("--force", action="store_true",
+                     help="run a scene whose plan exceeds the step budget (1e9 steps, gyro_sim/engine/budget.py); "
+                          "without it such a run is refused before it starts, saying which tolerance or parameter "
+                          "to loosen")
     run.set_defaults(func=_cmd_run)
 
     info = sub.add_parser("info", help="describe a recorded bag",

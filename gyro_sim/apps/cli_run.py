@@ -124,7 +124,12 @@ def _cmd_run(args) -> int:
         return _error(str(exc))
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem
     if args.ros:
+        if not args.force:  # the step budget, before the nodes start (in-process: the Runner refuses, before the bag)
+            bad = _over_budget(scene, args.duration)
+            if bad:
+                return _error(bad)
         return _run_ros(args, scene, name)
+    force = {"force": True} if args.force else {}
     from gyro_sim.compiled.compile_watch import announce_compiles
 
     announce_compiles()  # one line where numba compiles (a first use), before the long pause it explains
@@ -148,11 +153,12 @@ def _cmd_run(args) -> int:
             # streamed: the bag is written as the run goes (a signal or a full disk leaves it closed with
             # everything up to then); it integrates the attitude whatever output.attitude says (/gyro/imu needs it)
             # (keep_bytes=0: the summary and the plot need only its preview, so memory stays flat)
-            result = record_run(scene, args.record, duration=args.duration, on_samples=on_samples, keep_bytes=0)
+            result = record_run(scene, args.record, duration=args.duration, on_samples=on_samples, keep_bytes=0,
+                                **force)
         else:
             with sigterm_as_interrupt():
                 # --live: the attitude is integrated whatever output.attitude says (/tf and /gyro/imu need it)
-                result = simulate.run(scene, duration=args.duration, on_samples=on_samples,
+                result = simulate.run(scene, duration=args.duration, on_samples=on_samples, **force,
                                       **({"attitude": True} if live is not None else {}))
         if live is not None:
             try:
@@ -193,6 +199,25 @@ def _cmd_run(args) -> int:
     return EXIT_OK
 
 
+def _over_budget(scene, duration):
+    """The one line refusing a ``--ros`` run whose plan exceeds the step budget (gyro_sim/engine/budget.py), or None,
+    checked here before the nodes start (the simulator node checks it too, its ``force`` parameter)."""
+    from gyro_sim.engine.budget import check_budget
+    from gyro_sim.engine.model import controller_period
+    from gyro_sim.engine.simulator import Simulator
+    from gyro_sim.scenes.scene import SceneError
+
+    T = float(duration or scene.duration)
+    try:
+        # (the node integrates the attitude, and ticks every DEFAULT_CONTROL_PERIOD without a controller)
+        sim = Simulator(scene, attitude=True, horizon=T, quiet=True)
+        period = controller_period(scene) or 0.01
+        check_budget(sim, T, period)
+    except SceneError as exc:
+        return str(exc)
+    return None
+
+
 def _signal_name(status: int) -> str:
     import signal
 
@@ -230,7 +255,7 @@ def _run_ros(args, scene, name) -> int:
     bag = args.record or Path(args.out) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
     src = scene.source or args.scene
     code = launch(src, mode=args.mode, record=str(bag), duration=args.duration, rate_factor=args.rate_factor,
-                  with_controller=scene.controller is not None)
+                  with_controller=scene.controller is not None, force=args.force)
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)

@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit
 
 from gyro_sim.physics.frames import quat_to_matrix
-from gyro_sim.compiled.kernels import _equal_steps, _rotl, record_sample
+from gyro_sim.compiled.kernels import _equal_steps, _pause, _resume_at, _rotl, _steps_now, record_sample
 
 __all__ = ["integrate_frozen", "frozen_flow_step", "frozen_flow_step_case", "steady_modes", "supported",
            "torque_scale"]
@@ -498,11 +498,13 @@ def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes,
-                     out_y, out_N, k_out, eff, case=None):
+                     out_y, out_N, k_out, eff, case=None, pos=None, max_steps=0):
     """Integrate y from t0 through each time in ``t_stops`` with frozen-flow steps no longer than ``h_max``
     (equal steps between stops), recording like :func:`gyro_sim.kernels.integrate`. ``lam_modes`` (N,)
     = 1/τ_n; ``case``: isotropic rotor without attitude, modes in the case frame
-    (:func:`frozen_flow_step_case`, J = Jt). Returns (k_out, steps)."""
+    (:func:`frozen_flow_step_case`, J = Jt). ``pos``, ``max_steps``: a bounded call, as
+    :func:`gyro_sim.kernels.integrate`'s (a step's numbers depend on y, the span's start, its index and h only).
+    Returns (k_out, steps)."""
     P = om.shape[0]
     nm = lam_modes.shape[0]
     A = np.empty((P, 3), np.complex128)
@@ -521,21 +523,28 @@ def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, J
     sn = np.empty(P)
     steps = 0
     t = t0
-    for i in range(t_stops.shape[0]):
+    i0, j0 = _resume_at(pos)
+    for i in range(i0, t_stops.shape[0]):
         span = t_stops[i] - t
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
-            for j in range(k):
+            j1 = _steps_now(pos, max_steps, steps, j0, k)
+            for j in range(j0, j1):
                 if case is not None:
                     frozen_flow_step_case(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, lam_modes, w, c_m, tail, nm,
                                           A, X, Z, EZ, EO, S, E_end, out)
                 else:
                     frozen_flow_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jt, Ja, ax, lam_modes, w, c_m, tail,
                                      nm, A, X, Z, EZ, EO, S, E_end, out, R, K1)
-            steps += k
+            steps += j1 - j0
+            if j1 < k:
+                _pause(pos, i, j1, t)
+                return k_out, steps
+            j0 = 0
             t = t_stops[i]
         if record[i]:
             record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N,
                           k_out, case)
             k_out += 1
+    _pause(pos, t_stops.shape[0], 0, t)
     return k_out, steps

@@ -513,6 +513,37 @@ def _equal_steps(span, h_max):
 
 
 @njit(cache=True)
+def _resume_at(pos):
+    """(stop index, step of its span) a bounded stepper call starts at: ``pos[0]``, ``pos[1]`` (0, 0 without
+    ``pos``). See :func:`integrate`."""
+    if pos is None:
+        return 0, 0
+    return int(pos[0]), int(pos[1])
+
+
+@njit(cache=True)
+def _steps_now(pos, max_steps, steps, j0, k):
+    """The step of a span of ``k`` steps this call ends before: k, or fewer where the call's ``max_steps`` (with
+    ``steps`` taken) runs out (never fewer than j0 + 1 on a call's first span: each call makes progress)."""
+    if pos is None:
+        return k
+    left = max_steps - steps
+    if left < 1 and steps == 0:
+        left = 1
+    return k if k - j0 <= left else j0 + left
+
+
+@njit(cache=True)
+def _pause(pos, i, j, t):
+    """Where the next call resumes: stop ``i`` (the number of stops: done), step ``j`` of its span, which started
+    at ``t`` (the next call's t0)."""
+    if pos is not None:
+        pos[0] = i
+        pos[1] = j
+        pos[2] = t
+
+
+@njit(cache=True)
 def integrate_etd(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
                   out_y, out_N, k_out, eff):
     """:func:`integrate` with the ETDRK4 step."""
@@ -635,8 +666,10 @@ def free_step(y, h, Jinv, inv_ref, axis, tau):
 
 
 @njit(cache=True, nogil=True)
-def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_y, out_N, k_out):
-    """Torque-free counterpart of :func:`integrate` (same stops/record/output contract).
+def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_y, out_N, k_out, pos=None,
+                   max_steps=0):
+    """Torque-free counterpart of :func:`integrate` (same stops/record/output contract, ``pos`` and
+    ``max_steps`` as there).
 
     ``axis``: body axis index carrying H_r (axisymmetric body: exact steps), −2 for a
     spherical inertia (H_r = 0), −1 for a triaxial body (4th-order midpoint composition), −3 for a
@@ -644,13 +677,19 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
     """
     steps = 0
     t = t0
-    for i in range(t_stops.shape[0]):
+    i0, j0 = _resume_at(pos)
+    for i in range(i0, t_stops.shape[0]):
         span = t_stops[i] - t
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
-            for _ in range(k):
+            j1 = _steps_now(pos, max_steps, steps, j0, k)
+            for _ in range(j0, j1):
                 free_step(y, h, Jinv, inv_ref, axis, tau)
-            steps += k
+            steps += j1 - j0
+            if j1 < k:
+                _pause(pos, i, j1, t)
+                return k_out, steps
+            j0 = 0
             t = t_stops[i]
         if record[i]:
             out_y[k_out, :] = y
@@ -658,6 +697,7 @@ def integrate_free(y, t0, t_stops, record, h_max, Jinv, inv_ref, axis, tau, out_
             out_N[k_out, 1] = 0.0
             out_N[k_out, 2] = 0.0
             k_out += 1
+    _pause(pos, t_stops.shape[0], 0, t)
     return k_out, steps
 
 
@@ -792,7 +832,7 @@ def lawson_case_step(y, s, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols, 
 
 @njit(cache=True, nogil=True)
 def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, tail, lam,
-              out_y, out_N, k_out, eff, A, b, c, case=None):
+              out_y, out_N, k_out, eff, A, b, c, case=None, pos=None, max_steps=0):
     """Integrate y from t0 through each time in ``t_stops`` (increasing).
 
     The step is :func:`lawson_lie_step` with the tableau (A, b, c), or :func:`etd_lie_step` (ETDRK4)
@@ -801,6 +841,14 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
     into equal steps no longer than ``h_max``. Where ``record[i]`` the state and the torque (case, N·m)
     at ``t_stops[i]`` are written to ``out_y[k_out]``, ``out_N[k_out]`` and k_out advances. Returns
     (k_out, steps).
+
+    A bounded call (``pos``, float (3,), given): it starts at stop ``pos[0]``, step ``pos[1]`` of that stop's
+    span (t0 the span's start), takes at most ``max_steps`` steps and writes where the next call resumes to
+    ``pos``: [stop, step of its span, the span's start (the next call's t0)]; ``pos[0]`` is the number of stops
+    when all are reached. A span's steps are its equal steps (:func:`_equal_steps` of the span's own length, the
+    same numbers in every call), and a step's numbers depend on y, the span's start, its index and h only: the
+    states are the same bits as those of one call, however the calls are cut (the Python caller returns between
+    them, so a signal is handled: :meth:`gyro_sim.engine.simulator.Simulator.advance`).
     """
     n = y.shape[0]
     nm = (n - 7 - int(eff[NE])) // 3
@@ -834,7 +882,8 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
     h_last = -1.0
     steps = 0
     t = t0
-    for i in range(t_stops.shape[0]):
+    i0, j0 = _resume_at(pos)
+    for i in range(i0, t_stops.shape[0]):
         span = t_stops[i] - t
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
@@ -845,7 +894,8 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
                     etd_coefficients(lam, h, E, E2, Q, A1, A2, A3)
                 stage_trig_table(om, c_trig, h, tab)
                 h_last = h
-            for j in range(k):
+            j1 = _steps_now(pos, max_steps, steps, j0, k)
+            for j in range(j0, j1):
                 if case is not None:
                     if lawson:
                         lawson_case_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm, b, c, cols,
@@ -859,12 +909,17 @@ def integrate(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, c_m, w, 
                 else:
                     etd_lie_step(y, (t - t_seg) + j * h, h, Bre, Bim, om, Jinv, c_m, w, tail, nm,
                                  E, E2, Q, A1, A2, A3, buf, work, K, eff, tab, tw)
-            steps += k
+            steps += j1 - j0
+            if j1 < k:
+                _pause(pos, i, j1, t)
+                return k_out, steps
+            j0 = 0
             t = t_stops[i]
         if record[i]:
             record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, tw[0], tw[1], Fs[0], work, out_y,
                           out_N, k_out, case)
             k_out += 1
+    _pause(pos, t_stops.shape[0], 0, t)
     return k_out, steps
 
 

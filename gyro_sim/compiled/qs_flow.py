@@ -60,7 +60,7 @@ import numpy as np
 from numba import njit
 
 from gyro_sim.compiled.frozen_flow import _integrals, _proj
-from gyro_sim.compiled.kernels import _equal_steps, _rotl, record_sample
+from gyro_sim.compiled.kernels import _equal_steps, _pause, _resume_at, _rotl, _steps_now, record_sample
 
 __all__ = ["applies", "integrate_qs", "qs_flow_step", "field_pairs"]
 
@@ -417,11 +417,12 @@ def qs_flow_step(y, s, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF,
 
 @njit(cache=True)
 def integrate_qs(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, out_y, out_N,
-                 k_out, eff, case=None):
+                 k_out, eff, case=None, pos=None, max_steps=0):
     """Integrate y from t0 (s) through each time in ``t_stops`` with quasi-static flow steps no longer than
     ``h_max`` (equal steps between stops), recording like :func:`gyro_sim.kernels.integrate` (phasors referred
-    to t_seg; k_e = c_m × tail, tail = τ_eff). ``case``: an isotropic rotor without attitude (J = Jt). Returns
-    (k_out, steps)."""
+    to t_seg; k_e = c_m × tail, tail = τ_eff). ``case``: an isotropic rotor without attitude (J = Jt). ``pos``,
+    ``max_steps``: a bounded call, as :func:`gyro_sim.kernels.integrate`'s (what a step keeps from the step
+    before, e^{i f_t h}, is the same numbers made afresh at a call's first step). Returns (k_out, steps)."""
     P = om.shape[0]
     nt = P * P
     M0 = np.empty(6)
@@ -444,17 +445,24 @@ def integrate_qs(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, J
     sn = np.empty(P)
     steps = 0
     t = t0
-    for i in range(t_stops.shape[0]):
+    i0, j0 = _resume_at(pos)
+    for i in range(i0, t_stops.shape[0]):
         span = t_stops[i] - t
         if span > 0.0:
             k, h = _equal_steps(span, h_max)
-            for j in range(k):
+            j1 = _steps_now(pos, max_steps, steps, j0, k)
+            for j in range(j0, j1):
                 qs_flow_step(y, (t - t_seg) + j * h, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF, out,
                              K, TI, case is not None)
-            steps += k
+            steps += j1 - j0
+            if j1 < k:
+                _pause(pos, i, j1, t)
+                return k_out, steps
+            j0 = 0
             t = t_stops[i]
         if record[i]:
             record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, 0, eff, cs, sn, F, work, out_y, out_N,
                           k_out, case)
             k_out += 1
+    _pause(pos, t_stops.shape[0], 0, t)
     return k_out, steps

@@ -230,7 +230,8 @@ def _handover_to_full(runner: Runner, k: int, L: float, theta: float) -> None:
         sim.y[7 + 3 * n: 10 + 3 * n] = gn.real * Bb - gn.imag * b_im
 
 
-def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optional[bool] = None) -> RunResult:
+def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optional[bool] = None,
+               force: bool = False) -> RunResult:
     """``fidelity: auto`` (and ``averaged``): full model where needed, the averaged model elsewhere.
 
     The regions are tested where the commands change and otherwise every ``RECHECK`` of the slow time
@@ -238,11 +239,12 @@ def run_hybrid(scene: Scene, duration: Optional[float] = None, estimate: Optiona
     inside one compiled call (or, with ``sampling: events``, switches the law at its exact instants). After
     a stretch that ended at its region's edge the full model runs that long before the next test; after
     one that ended at a command or an output window the next test is at once. A controller must be
-    settled (its next command the one in force) before a stretch starts.
+    settled (its next command the one in force) before a stretch starts. ``force``: as :func:`gyro_sim.engine.
+    simulate.run`'s (the step budget is the full model's plan).
     """
     from gyro_ctl.laws import make_law, make_switching
 
-    r = Runner(scene, duration, sample_breaks=False, estimate=estimate)
+    r = Runner(scene, duration, sample_breaks=False, estimate=estimate, force=force)
     sim = r.sim
     ctl = scene.controller
     law = make_law(ctl) if ctl is not None else None

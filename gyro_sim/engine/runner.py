@@ -10,6 +10,7 @@ import numpy as np
 
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
+from gyro_sim.engine.budget import check_budget
 from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.simulator import Simulator
@@ -41,12 +42,16 @@ class Runner:
     an in-process run decide alike), estimates the error and corrects the step; :meth:`error_estimate` gives the
     run's estimate. ``estimate=False`` (a run that locates switching events: its bisection re-integrates stretches
     the shadow cannot follow) runs the plan alone and estimates by the plan's model.
+
+    Budget: a run whose plan exceeds :data:`gyro_sim.scenes.step_control.STEP_BUDGET` steps is refused here, before
+    any work, with a :class:`gyro_sim.scenes.step_control.StepBudgetError` (a SceneError) saying what to loosen;
+    ``force`` runs it anyway (:mod:`gyro_sim.engine.budget`).
     """
 
     def __init__(self, scene: Scene, duration: Optional[float] = None, sample_breaks: bool = True,
                  attitude: Optional[bool] = None, control_period: Optional[float] = None,
                  buffer_rows: Optional[int] = None, horizon: Optional[float] = None,
-                 estimate: Optional[bool] = None):
+                 estimate: Optional[bool] = None, force: bool = False):
         T = scene.duration if duration is None else float(duration)
         if not (math.isfinite(T) and T > 0):
             raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
@@ -56,7 +61,14 @@ class Runner:
         # the accuracy plan is made for the run's duration (``horizon``: another, e.g. a re-run of an interrupted
         # bag planned for its whole duration)
         H = T if horizon is None else float(horizon)
-        self.sim = Simulator(scene, attitude, horizon=H)
+        self.sim = Simulator(scene, attitude, horizon=H, warn_plan=False)
+        # the step budget (gyro_sim/engine/budget.py): a plan beyond it is refused before any work, unless forced (in
+        # one line: the plan's warnings follow once it has passed)
+        self.period = control_period or controller_period(scene)
+        if not force:
+            check_budget(self.sim, T, self.period)
+        if not is_legacy():
+            self.sim._warn_plan(self.sim._rates[0])
         # the error control and its shadow run (gyro_sim/accuracy.py); checks at fixed fractions of the horizon
         plan = self.sim.step_plan
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
@@ -80,7 +92,6 @@ class Runner:
         self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
-        self.period = control_period or controller_period(scene)
         # every controller tick is an output sample too: the controller (node) sees the published state
         self.t_out, self._ticks = t_out, ticks = output_times(scene, T, self.period)
         self._cmds = sorted((c for c in scene.commands if c.time < T), key=lambda c: c.time)

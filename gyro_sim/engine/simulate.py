@@ -34,7 +34,7 @@ __all__ = ["Simulator", "RunResult", "Runner", "run", "drive", "stator_triad", "
 
 
 def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None,
-        estimate: Optional[bool] = None) -> RunResult:
+        estimate: Optional[bool] = None, force: bool = False) -> RunResult:
     """Run a scene in-process (no ROS) and return its time series at the scene's output rate.
 
     A scene with a ``controller`` runs its law (gyro_ctl) at every tick, and with ``sampling: events``
@@ -43,17 +43,20 @@ def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitud
     = the scene's ``output.attitude``, True = integrate it anyway (:func:`integrates_attitude`).
     ``estimate``: False runs without the error control's shadow run (:class:`Runner`; the estimate is then the
     step plan's model), e.g. to time the integrator alone at given knobs; None: with it where it can follow.
+    ``force``: run a scene whose plan exceeds the step budget (:data:`gyro_sim.scenes.step_control.STEP_BUDGET`;
+    without it such a run is refused before any work with a :class:`~gyro_sim.scenes.step_control.StepBudgetError`
+    saying what to loosen). Ctrl-C / SIGTERM stop a run within about a second wherever it is (KeyboardInterrupt).
     """
     if scene.fidelity != "full":
         from gyro_sim.engine.fidelity import run_hybrid  # (on first use: SciPy's solvers cost a full run's start-up)
 
-        return run_hybrid(scene, duration, estimate=estimate)
+        return run_hybrid(scene, duration, estimate=estimate, force=force)
     ctl = scene.controller
     switching = ctl is not None and ctl.sampling == "events"
     # samples are breaks where a caller acts on them, and where switching events are looked for between
     # breaks (the node does the same: the same events, the same bits)
     r = Runner(scene, duration, sample_breaks=on_samples is not None or switching, attitude=attitude,
-               estimate=estimate)
+               estimate=estimate, force=force)
     drive(r, on_samples)
     return r.result()
 

@@ -4,6 +4,7 @@ accuracy) advanced in time by the compiled steppers under piecewise-constant sta
 from __future__ import annotations
 
 import math
+import time
 from typing import Optional
 
 import numpy as np
@@ -13,10 +14,18 @@ from gyro_sim.engine.model import (FROZEN_FLOW_COST, _case_flag, _initial_attitu
                                    integrates_attitude, lawson8_cost, stator_triad)
 from gyro_sim.physics.conductor import DEFAULT_N_MODES, conductor_model
 from gyro_sim.physics.frames import euler_angles, quat_to_matrix
-from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan, field_rates,
-                                      is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
+from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan,
+                                      field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
 from gyro_sim.scenes.scene import Scene
+
+
+#: the wall time (s) one stepper call of :meth:`Simulator.advance` aims at: a long advance is made of calls of about
+#: this length, and Python handles a signal (SIGINT, SIGTERM) between two of them
+CALL_WALL = 0.1
+#: steps of the first call of a long advance, and the bounds the calls' steps are tuned within (:meth:`Simulator.
+#: _tune_call`); where the calls are cut does not change a bit of the result
+CALL_STEPS = (4096, 16, 1 << 24)
 
 
 class Simulator:
@@ -28,7 +37,7 @@ class Simulator:
     """
 
     def __init__(self, scene: Scene, attitude: Optional[bool] = None, horizon: Optional[float] = None,
-                 quiet: bool = False):
+                 quiet: bool = False, warn_plan: bool = True):
         self.scene = scene
         self.quiet = quiet  # no accuracy warnings (a shadow run: gyro_sim.accuracy.ErrorControl)
         # the step is the plan's divided by step_div (the run's error control changes it at its checks); a shadow
@@ -116,6 +125,7 @@ class Simulator:
         if self.tau.size:
             self._field_step(np.zeros(3), self.field_now())
         self.steps = 0
+        self.call_steps = CALL_STEPS[0]  # most steps of one stepper call (advance: tuned to CALL_WALL s a call)
         # free-rotor geometry: reference inertia and the axis carrying H_r
         if J[0] == J[1] == J[2]:
             self._free_axis, ref = -2, J[0]
@@ -138,11 +148,12 @@ class Simulator:
         L_bound = Lmag0 if om_reach <= Lmag0 * float(np.max(self.Jinv)) * (1 + 1e-12) else float(np.max(J)) * om_reach
         self.L_bound = L_bound  # the largest |L| the run can reach (N m s; gyro_sim.accuracy.ErrorControl)
         om_free = L_bound * float(np.max(np.abs(self.Jinv - self._inv_ref))) if self._free_axis == -1 else 0.0
+        self._rates = (om_plan, om_free)  # (plan_for: the plan at other tolerances)
         self.step_plan = step_plan(scene, self.horizon, self.attitude, om_plan, om_free)
         self._auto_plan = auto_plan(self.step_plan, scene)
         self._knob_warned: set = set()
-        if not quiet and not is_legacy():
-            self._warn_plan(om_plan)
+        if not quiet and not is_legacy() and warn_plan:  # (warn_plan False: the caller warns, _warn_plan, once the
+            self._warn_plan(om_plan)                     # step budget has passed the plan: Runner)
 
     # --- named views of the state -------------------------------------------------------------
     @property
@@ -316,6 +327,27 @@ class Simulator:
         (2.6 s CPU) against lawson8's 10 319 (0.18 s), docs/accuracy.md."""
         return not is_legacy() and qs_flow.applies(self.scene, self.J, self.eff[effects.ON] != 0.0)
 
+    def planned_steps(self, plan=None) -> float:
+        """The steps the run's plan predicts over its horizon (the accuracy's own knobs, :attr:`_auto_plan`, or
+        ``plan``: :meth:`plan_for`): turns of the fastest rotation times lawson8's or ETDRK4's steps per turn, or the
+        horizon over the frozen-flow step where that stepper applies, the fewest of them. An estimate made before
+        any step (the error control then changes the step); :data:`gyro_sim.scenes.step_control.STEP_BUDGET` bounds
+        it (:mod:`gyro_sim.engine.budget`)."""
+        plan = self._auto_plan if plan is None else plan
+        steps = min(plan.turns * plan.steps_per_turn["lawson8"], plan.turns * plan.steps_per_turn["etdrk4"])
+        if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0 and self.c_m > 0:
+            steps = min(steps, self.horizon / self._frozen_flow_step(plan.rate_change))
+        return float(steps)
+
+    def plan_for(self, rtol: float, attitude: Optional[float]):
+        """The plan (as :attr:`_auto_plan`: the accuracy's own knobs) this run would take at tolerances ``rtol`` and
+        ``attitude`` (rad, None: none) instead of the scene's; for :meth:`planned_steps` (what to loosen)."""
+        from types import SimpleNamespace
+
+        alt = SimpleNamespace(accuracy=SimpleNamespace(rtol=rtol, attitude=attitude),
+                              integrator=self.scene.integrator)
+        return auto_plan(step_plan(alt, self.horizon, self.attitude, *self._rates), alt)
+
     def _warn_plan(self, om_plan: float) -> None:
         """Warn where the scene's attitude tolerance is below the floor a plan takes (PHASE_REL_MIN of the spin
         phase), and where the plan predicts a very long run (more than STEPS_WARN steps)."""
@@ -334,9 +366,7 @@ class Simulator:
                 f"about {PHASE_REL_MIN:g} of itself; planning for {floor:.2g} rad (set accuracy.phase_atol to at "
                 f"least that, or leave it out: accuracy.phase holds the phase relative to itself)")
         plan = self._auto_plan
-        steps = min(plan.turns * plan.steps_per_turn["lawson8"], plan.turns * plan.steps_per_turn["etdrk4"])
-        if frozen_flow.supported(self.J) >= 0 and self.eff[effects.ON] == 0.0 and self.c_m > 0:
-            steps = min(steps, T / self._frozen_flow_step(plan.rate_change))
+        steps = self.planned_steps()
         if steps > STEPS_WARN:
             accuracy_warning(
                 f"scene {self.scene.name!r}: accuracy (rtol {acc.rtol:g}, attitude {acc.attitude} rad) over "
@@ -472,30 +502,58 @@ class Simulator:
         t_seg, Bre, Bim, om, free, method, h_max = self._segment()
         if not math.isfinite(h_max):
             h_max = max(t_end - self.t, 1e-300)
-        if method == "frozen_flow":
-            ax = frozen_flow.supported(self.J)
-            k_out, steps = frozen_flow.integrate_frozen(
-                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
-                self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
-                *_case_flag(self.attitude))
-        elif method == "qs_flow":
-            ax = frozen_flow.supported(self.J)
-            k_out, steps = qs_flow.integrate_qs(
-                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
-                self.J[ax], ax, self.c_m, self.w, self.tail, out_y, out_N, k_out, self.eff, *_case_flag(self.attitude))
-        elif free:
-            k_out, steps = kernels.integrate_free(
-                self.y, self.t, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
-                out_y, out_N, k_out)
-        else:
-            k_out, steps = kernels.integrate(
-                self.y, self.t, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
-                self.tail, self.lam, out_y, out_N, k_out, self.eff, *_tableau(method), *_case_flag(self.attitude))
-        self.steps += steps
+        # the stepper is called for at most self.call_steps steps at a time and resumes where it stopped (the same
+        # steps, the same bits: gyro_sim.compiled.kernels.integrate): between calls Python runs, so SIGINT / SIGTERM
+        # are handled within about CALL_WALL s however long the advance
+        pos = np.zeros(3)
+        t0 = self.t
+        case = _case_flag(self.attitude)
+        ax = frozen_flow.supported(self.J) if method in ("frozen_flow", "qs_flow") else 0
+        tab = None if method in ("frozen_flow", "qs_flow") or free else _tableau(method)
+        n = stops.size
+        while True:
+            budget = self.call_steps
+            w0 = time.perf_counter()
+            if method == "frozen_flow":
+                k_out, steps = frozen_flow.integrate_frozen(
+                    self.y, t0, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
+                    self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
+                    *case, pos, budget)
+            elif method == "qs_flow":
+                k_out, steps = qs_flow.integrate_qs(
+                    self.y, t0, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
+                    self.J[ax], ax, self.c_m, self.w, self.tail, out_y, out_N, k_out, self.eff, *case, pos, budget)
+            elif free:
+                k_out, steps = kernels.integrate_free(
+                    self.y, t0, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,
+                    out_y, out_N, k_out, pos, budget)
+            else:
+                k_out, steps = kernels.integrate(
+                    self.y, t0, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.c_m, self.w,
+                    self.tail, self.lam, out_y, out_N, k_out, self.eff, *tab, *case, pos, budget)
+            self.steps += steps
+            if pos[0] >= n:
+                break
+            self._tune_call(time.perf_counter() - w0, steps)
+            t0 = float(pos[2])
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
         self._seg_t_end = t_end
         return k_out
+
+    def _tune_call(self, wall: float, steps: int) -> None:
+        """Tune the steps of the next stepper calls after a call cut at ``self.call_steps`` that took ``wall`` s:
+        towards :data:`CALL_WALL` s a call (double where it took less than a quarter of it, in proportion where it
+        took more; the first call of a process also compiles the stepper), within :data:`CALL_STEPS`."""
+        if steps < self.call_steps:
+            return
+        if wall < 0.25 * CALL_WALL:
+            n = 2 * self.call_steps
+        elif wall > CALL_WALL:
+            n = int(self.call_steps * 0.5 * CALL_WALL / wall)
+        else:
+            return
+        self.call_steps = min(max(n, CALL_STEPS[1]), CALL_STEPS[2])
 
     def _segment(self) -> tuple:
         """(t_seg, Bre, Bim, ω, free, stepper, h_max) for the next advance: the phasors referred to t_seg and

@@ -24,6 +24,7 @@ each break), ``sampling: events`` (the located switches stay in Python).
 from __future__ import annotations
 
 import math
+import time
 from contextlib import contextmanager
 from typing import Iterator, Optional
 
@@ -47,6 +48,9 @@ MAX_BREAKS = 512
 _TWO_PI = 2 * math.pi
 _NO_AXES = np.zeros((0, 3))
 _ENABLED = [True]  # False inside python_ticks()
+#: the steppers' step bound in a call of the compiled loop (none: the loop's extent bounds its steps,
+#: TickLoop._within_call; the argument types are Simulator.advance's, so numba compiles no second stepper)
+_UNBOUNDED = np.int64(1 << 62)
 
 
 # --- the steppers of Simulator.advance with one signature (their own arguments in the tuple P) ----------------
@@ -56,7 +60,7 @@ def _fields(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
     c, case)."""
     Bre, Bim, om, Jinv, c_m, w, tail, lam, eff, A, b, c, case = P
     return kernels.integrate(y, t0, t_seg, stops, record, h, Bre, Bim, om, Jinv, c_m, w, tail, lam, out_y, out_N, k,
-                             eff, A, b, c, case)
+                             eff, A, b, c, case, np.zeros(3), _UNBOUNDED)
 
 
 @njit(cache=True)
@@ -65,14 +69,15 @@ def _frozen(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
     T_tail, 1/τ, eff, case)."""
     Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes, eff, case = P
     return frozen_flow.integrate_frozen(y, t0, t_seg, stops, record, h, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail,
-                                        lam_modes, out_y, out_N, k, eff, case)
+                                        lam_modes, out_y, out_N, k, eff, case, np.zeros(3), _UNBOUNDED)
 
 
 @njit(cache=True)
 def _free(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
     """The torque-free stepper (:func:`gyro_sim.kernels.integrate_free`); P = (J⁻¹, 1/J_ref, axis, τ)."""
     Jinv, inv_ref, axis, tau = P
-    return kernels.integrate_free(y, t0, stops, record, h, Jinv, inv_ref, axis, tau, out_y, out_N, k)
+    return kernels.integrate_free(y, t0, stops, record, h, Jinv, inv_ref, axis, tau, out_y, out_N, k, np.zeros(3),
+                                  _UNBOUNDED)
 
 
 @njit(inline="always")
@@ -261,8 +266,14 @@ class TickLoop:
         i0, j = r._bi, self._extent(until)
         if j <= i0 or r.sim._segment()[5] not in COMPILED_STEPPERS:
             return None
+        j_all, j = j, self._within_call(i0, j)
+        if j <= i0:  # (a break farther than a call's steps: Runner.advance, whose stepper calls are bounded)
+            return None
         with CompileClock() as clock:
+            w0 = time.perf_counter()
             bk, law_at, rows, n_log, log_c, log_r = self._advance_main(r.breaks[i0:j])
+            if j < j_all:  # (the call's steps bounded it: tuned to Simulator.CALL_WALL s a call)
+                r.sim._tune_call(time.perf_counter() - w0, r.sim.call_steps)
             nb = r._bi - i0
             common = bk[:nb][self._common[i0:i0 + nb]]
             if r.shadow is not None and common.size:
@@ -282,6 +293,18 @@ class TickLoop:
             j = min(j, int(np.searchsorted(r.breaks, until, side="right")))
         room = r._base + r.out_y.shape[0]  # the first sample the output buffer cannot take
         return min(j, i0 + int(np.searchsorted(self._s_end[i0:j], room, side="right")))
+
+    def _within_call(self, i0: int, j: int) -> int:
+        """The end (exclusive) of the breaks r.breaks[i0:j] one compiled call may take: those within the steps
+        of one stepper call (:attr:`Simulator.call_steps` steps of the segment's step from now), so Python
+        handles a signal between calls (the shadow's steps are longer). One break at a time where the plan has
+        no step bound."""
+        r = self.r
+        sim = r.sim
+        h = sim._seg[1][6]
+        if not math.isfinite(h):
+            return j  # (a step a stop)
+        return min(j, int(np.searchsorted(r.breaks, sim.t + sim.call_steps * h, side="right")))
 
     def _advance_main(self, bk: np.ndarray) -> tuple:
         """The run through breaks ``bk`` (from r._bi on) in one call of :func:`breaks`: its state, samples, field

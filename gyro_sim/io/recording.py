@@ -191,7 +191,8 @@ class _StreamOrder:
 
 
 def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] = None, on_samples=None,
-               extra: Optional[Mapping[str, Any]] = None, keep_bytes: int = KEEP_BYTES) -> "RunResult":
+               extra: Optional[Mapping[str, Any]] = None, keep_bytes: int = KEEP_BYTES,
+               force: bool = False) -> "RunResult":
     """Run a scene in-process and write its bag at ``path`` as it runs (the same bag :func:`record_result` writes
     of the same run, message for message). Memory stays flat: the simulator holds a buffer of
     :data:`STREAM_BUFFER_ROWS` output rows, the bag's open chunk is bounded (:data:`CHUNK_SPAN`,
@@ -204,7 +205,8 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
     the bag with everything up to the signal (``gyro_sim.end`` = ``interrupted: ...``) and re-raise
     (:class:`RunInterrupted` for SIGTERM / SIGHUP, KeyboardInterrupt for Ctrl-C). A full disk closes the bag
     with what fit and raises :class:`RecordingError`. ``on_samples(dict)`` is called with each chunk of rows.
-    A scene with ``fidelity`` other than ``full`` is run in memory and recorded when it ends."""
+    A scene with ``fidelity`` other than ``full`` is run in memory and recorded when it ends. ``force``: run a plan
+    beyond the step budget (:func:`gyro_sim.engine.simulate.run`; refused before the bag is made without it)."""
     from gyro_sim.engine.simulate import Runner, drive, kinetic_energy
     from gyro_sim.engine.simulate import RunResult as _RunResult
 
@@ -213,10 +215,10 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
     if scene.fidelity != "full":
         from gyro_sim.engine.simulate import run as _run
 
-        result = _run(scene, duration, attitude=True)
+        result = _run(scene, duration, attitude=True, force=force)
         record_result(result, path, extra)
         return result
-    r = Runner(scene, duration, sample_breaks=True, attitude=True, buffer_rows=STREAM_BUFFER_ROWS)
+    r = Runner(scene, duration, sample_breaks=True, attitude=True, buffer_rows=STREAM_BUFFER_ROWS, force=force)
     kept = _Kept(keep_bytes)
     ext = {"gyro_sim.planned_duration": repr(float(r.T))}
     ext.update(extra or {})

@@ -29,7 +29,7 @@ def rerun_bag(path) -> dict:
     planned = b.custom.get("gyro_sim.planned_duration")
     runner = Runner(scene, float(b.t[-1]), attitude=True,  # bags are recorded with the attitude
                     control_period=float(period) if period else None,
-                    horizon=float(planned) if planned else None)
+                    horizon=float(planned) if planned else None, force=True)  # (the run was made once)
     cmds: dict[int, list] = defaultdict(list)
     for i, t in enumerate(b.command_t):
         cmds[stamp_ns(t)].append(i)

@@ -167,7 +167,7 @@ def _as_status(code: int) -> int:
 
 def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, duration: Optional[float] = None,
            rate_factor: float = 1.0, watchdog_timeout: float = 2.0, with_controller: bool = True,
-           domain_id: Optional[int] = None, progress: Optional[bool] = None) -> int:
+           domain_id: Optional[int] = None, progress: Optional[bool] = None, force: bool = False) -> int:
     """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends; then end the
     controller (SIGINT).
 
@@ -176,6 +176,7 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
     for the signals: forwarded to both nodes, bounded waits, the nodes die with this process). Call it from a
     thread that lives as long as the call (PR_SET_PDEATHSIG is tied to the thread that starts the nodes; it returns
     only once they have ended). ``progress`` (default: stderr is a terminal): the simulator shows a progress line.
+    ``force``: the simulator runs a plan beyond the step budget (its ``force`` parameter, gyro_sim/engine/budget.py).
     """
     if progress is None:
         progress = sys.stderr.isatty()
@@ -186,6 +187,8 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
     sim_params = {"scene": scene, "mode": mode, "rate_factor": float(rate_factor),
                   "watchdog_timeout": float(watchdog_timeout), "duration": float(duration or 0.0),
                   "progress": "true" if progress else "false"}
+    if force:
+        sim_params["force"] = "true"
     if record:
         sim_params["record"] = str(Path(record).resolve())
     preexec = node_preexec()

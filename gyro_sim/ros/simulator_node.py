@@ -76,6 +76,8 @@ PARAMETERS = (
     ("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", (1e-3, 1e4), False),
     ("duration", 0.0, "simulated duration in s (0 = the scene's)", (0.0, 1e9), True),
     ("record", "", "bag directory to record to (empty = no recording)", None, True),
+    ("force", False, "run a scene whose plan exceeds the step budget (gyro_sim/engine/budget.py; without it such a "
+     "run is refused at start, status 2, saying which tolerance or parameter to loosen)", None, True),
     ("control_period", None, "s between control ticks, where commands are taken (default: the scene controller's "
      f"period; {DEFAULT_CONTROL_PERIOD:g} s for a scene without a controller section)", (1e-6, 3600.0), True),
     ("expect_controller", None, "a controller is expected (default: the scene has a controller section): lockstep "
@@ -326,7 +328,8 @@ class Loop:
         # a bounded buffer of output rows, released once published and recorded: memory stays flat however long
         # the run
         self.runner = Runner(node.scene, self.p["duration"] or None, attitude=True,
-                             control_period=self.p["control_period"], buffer_rows=STREAM_BUFFER_ROWS)
+                             control_period=self.p["control_period"], buffer_rows=STREAM_BUFFER_ROWS,
+                             force=bool(self.p["force"]))
         self.names = list(self.runner.sim.stator_names)
         node.faults = Faults(node.fault_config, len(self.names)) if node.fault_config.active else None
         self.latest = None  # latest valid command (names, current, rate, stamp_ns)

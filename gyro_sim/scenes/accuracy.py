@@ -75,6 +75,8 @@ from gyro_sim.scenes.step_control import (  # noqa: F401  (the names of the accu
     RATE_KNOB,
     PHASE_REL_MIN,
     STEPS_WARN,
+    STEP_BUDGET,
+    StepBudgetError,
     SPT_MIN,
     SPT_MAX,
     RATE_CHANGE_MAX,

@@ -9,6 +9,7 @@ from typing import Optional
 import numpy as np
 
 from gyro_sim.physics.frames import attitude_split
+from gyro_sim.scenes.scene_text import SceneError
 from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, has_symmetry_axis,
                                       is_legacy, phase_tolerance, planning_attitude)
 
@@ -41,6 +42,22 @@ RATE_KNOB = frozenset({"frozen_flow", "qs_flow"})
 PHASE_REL_MIN = 1e-12
 #: a plan predicting more steps than this warns (minutes of CPU on the machines measured)
 STEPS_WARN = 1e8
+#: a run whose plan predicts more work than this (steps, plus its output samples and controller ticks: each is a
+#: stop of the stepper) is refused before it starts, in one line saying what to loosen (gyro_sim.engine.budget;
+#: ``gyro-sim run --force`` / ``run(scene, force=True)`` runs it anyway). 1e9 steps are about 1.5 to 3 CPU-hours
+#: at the 5 to 10 µs a step of the built-in scenes (the shadow run of the error control included): a plan beyond
+#: it is a tolerance or a duration asked by mistake far more often than a run someone means to wait for (the
+#: default scene over 30 000 s at its default accuracy plans 1.7e9 steps; with ``accuracy.attitude: null``, 4e6)
+STEP_BUDGET = 1e9
+
+
+class StepBudgetError(SceneError):
+    """A run refused before it starts: its plan exceeds :data:`STEP_BUDGET` (the message, one line, says what to
+    loosen). ``planned``: the work the plan predicts (steps), ``budget``: the budget it exceeds."""
+
+    def __init__(self, message: str, planned: float = math.nan, budget: float = STEP_BUDGET):
+        super().__init__(message)
+        self.planned, self.budget = float(planned), float(budget)
 #: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
 SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
 SPT_MAX = 100000  # the scene format's limit of steps_per_turn
