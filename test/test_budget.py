@@ -127,22 +127,28 @@ def test_absurd_plan_is_refused_before_any_work_and_runs_interruptibly_when_forc
 # --- the budget -----------------------------------------------------------------------------------------------
 
 def test_budget_refusal_names_what_to_loosen():
-    """The default scene over 30 000 s at its default accuracy plans ~1.7e9 steps: refused (a SceneError: the CLI's
-    one error line, status 2) in one line that names the tolerance that would fit (accuracy.attitude), the duration
-    that would, and force; force=True makes the Runner (the run itself is the test above)."""
-    sc = load_scene("spinup_thin_shell")
+    """The default scene over 30 000 s with its spin phase held absolutely (``phase_atol: 1e-6``: the attitude
+    tolerance's meaning before issue 28) plans ~1.7e9 steps: refused (a SceneError: the CLI's one error line, status
+    2) in one line that names the tolerance that would fit (the phase relative to itself), the duration that would,
+    and force; force=True makes the Runner (the run itself is the test above). As shipped (phase relative) the same
+    30 000 s fit the budget."""
+    sc = load_scene("spinup_thin_shell", overrides={"accuracy": {"phase_atol": 1e-6}})
     with pytest.raises(StepBudgetError) as info:
         run(sc, duration=30000.0)
     msg = str(info.value)
     print(f"\n  {msg}")
     assert isinstance(info.value, SceneError) and "\n" not in msg
-    assert "accuracy.attitude" in msg and "null" in msg and "duration" in msg and "force" in msg
+    assert "accuracy.phase_atol" in msg and "duration" in msg and "force" in msg
     assert info.value.planned > STEP_BUDGET == info.value.budget
     r = Runner(sc, 30000.0, force=True)
     assert r.sim.steps == 0 and r.T == 30000.0
-    # the same scene at a looser attitude (what the message says) fits, and within the budget nothing is said
-    loose = load_scene("spinup_thin_shell", overrides={"accuracy": {"attitude": None}})
-    Runner(loose, 30000.0)
+    # the scene as shipped (what the message says) fits, and within the budget nothing is said
+    Runner(load_scene("spinup_thin_shell"), 30000.0)
+    # a tolerance the plan can loosen: the attitude of a triaxial body (no spin phase apart) at an absurd rtol
+    tri = load_scene("free_rotor", overrides={"accuracy": {"rtol": 1e-13, "attitude": 1e-13},
+                                              "output": {"rate": 1e-3}})
+    with pytest.raises(StepBudgetError, match="accuracy.attitude"):
+        Runner(tri, 1e6)
     steps, stops = planned_work(Simulator(sc, quiet=True), 60.0, 0.02)
     assert 1e4 < steps < 1e7 and stops == pytest.approx(60 * 50 + 2 + 60 / 0.02 + 1)
 

@@ -42,9 +42,12 @@ def check_budget(sim, T: float, period: Optional[float], budget: Optional[float]
         raise StepBudgetError(budget_message(sim, T, period, steps, stops, budget), planned=total, budget=budget)
 
 
-def _fits(sim, T: float, rtol: float, attitude: Optional[float], stops: float, budget: float) -> Optional[float]:
-    """The steps of the run at tolerances (rtol, attitude) where they fit the budget (with the stops), else None."""
-    steps = sim.planned_steps(sim.plan_for(rtol, attitude)) * (T / sim.horizon if sim.horizon > 0 else 1.0)
+def _fits(sim, T: float, rtol: float, attitude: Optional[float], stops: float, budget: float,
+          **accuracy) -> Optional[float]:
+    """The steps of the run at tolerances (rtol, attitude; ``accuracy``: other fields of the scene's accuracy) where
+    they fit the budget (with the stops), else None."""
+    steps = sim.planned_steps(sim.plan_for(rtol, attitude, **accuracy)) * (T / sim.horizon if sim.horizon > 0
+                                                                             else 1.0)
     return steps if steps + stops <= budget else None
 
 
@@ -59,7 +62,13 @@ def budget_message(sim, T: float, period: Optional[float], steps: float, stops: 
             f"({steps:.2g} steps of the stepper, {stops:.2g} output samples and controller ticks), beyond the "
             f"budget of {budget:.3g} (STEP_BUDGET)")
     ways = []
-    if stops <= 0.5 * budget:
+    if stops <= 0.5 * budget and sim.attitude and (acc.phase_atol is not None or (acc.phase or 1.0) < 1e-9):
+        # an absolute (or very tight) spin phase: its error grows with the turns
+        if _fits(sim, T, acc.rtol, acc.attitude, stops, budget, phase_atol=None, phase=1e-9) is not None:
+            now = (f"phase_atol {acc.phase_atol:g} rad" if acc.phase_atol is not None else f"phase {acc.phase:g}")
+            ways.append(f"hold the spin phase relative to itself: leave out accuracy.phase_atol, accuracy.phase 1e-9 "
+                        f"(now {now})")
+    if stops <= 0.5 * budget and not ways:
         att_on = sim.attitude and acc.attitude is not None
         null_fits = att_on and _fits(sim, T, acc.rtol, None, stops, budget) is not None
         if att_on:

@@ -18,6 +18,7 @@ from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, ST
                                       field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
 from gyro_sim.scenes.scene import Scene
+from gyro_sim.scenes.tolerance import has_symmetry_axis
 
 
 #: the wall time (s) one stepper call of :meth:`Simulator.advance` aims at: a long advance is made of calls of about
@@ -339,13 +340,11 @@ class Simulator:
             steps = min(steps, self.horizon / self._frozen_flow_step(plan.rate_change))
         return float(steps)
 
-    def plan_for(self, rtol: float, attitude: Optional[float]):
+    def plan_for(self, rtol: float, attitude: Optional[float], **accuracy):
         """The plan (as :attr:`_auto_plan`: the accuracy's own knobs) this run would take at tolerances ``rtol`` and
         ``attitude`` (rad, None: none) instead of the scene's; for :meth:`planned_steps` (what to loosen)."""
-        from types import SimpleNamespace
-
-        alt = SimpleNamespace(accuracy=SimpleNamespace(rtol=rtol, attitude=attitude),
-                              integrator=self.scene.integrator)
+        alt = self.scene.model_copy(update={"accuracy": self.scene.accuracy.model_copy(
+            update={"rtol": rtol, "attitude": attitude, **accuracy})})
         return auto_plan(step_plan(alt, self.horizon, self.attitude, *self._rates), alt)
 
     def _warn_plan(self, om_plan: float) -> None:
@@ -353,7 +352,7 @@ class Simulator:
         phase), and where the plan predicts a very long run (more than STEPS_WARN steps)."""
         acc, T = self.scene.accuracy, self.horizon
         floor = PHASE_REL_MIN * om_plan * T
-        if self.attitude and acc.attitude is not None and acc.attitude < floor:
+        if self.attitude and acc.attitude is not None and acc.attitude < floor and not has_symmetry_axis(self.J):
             accuracy_warning(
                 f"scene {self.scene.name!r}: accuracy.attitude = {acc.attitude:g} rad cannot be held over {T:g} s: "
                 f"the phase the run can turn through is {om_plan * T:.3g} rad, and a run holds it to about "

@@ -143,11 +143,6 @@ def symmetry_axis(J) -> int:
     return -1
 
 
-#: below this sin θ the precession phase's error counts in proportion (sin θ / this): the axis then barely moves
-#: off L, and the angle of its projection on the plane normal to L says little
-PRECESSION_SIN_MIN = 1e-2
-
-
 def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int, L1=None, L2=None) -> tuple[np.ndarray, np.ndarray]:
     """Split the difference of two attitudes (unit quaternions (..., 4), body → case) into what an engineer
     observes from the case and the fast phases: ``(direction, phase)`` in rad.
@@ -157,9 +152,9 @@ def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int, L1=None, L2=None) 
 
     With the kinetic moments L1, L2 (case frame, (..., 3)), the symmetry axis is seen as the rotor shows it: a
     cone about L. ``direction`` = the angle between L1 and L2 plus the difference of the nutation angles θ (the
-    cone's axis and half-angle); ``phase`` = the larger of the spin phase's error (the twist) and the precession
-    phase's (the angle between the two axes' projections on the plane normal to L, in proportion below
-    :data:`PRECESSION_SIN_MIN` of sin θ): both are phases the rotor turns through at about its spin rate.
+    cone's axis and half-angle); ``phase`` = the larger of the spin phase's error (the twist) and the arc the axis
+    is off along its cone (sin θ times the precession phase's error: the angle between the two axes' projections
+    on the plane normal to L): both move with phases the rotor turns through at about its spin rate.
 
     ``axis`` −1 (no symmetry axis): ``direction`` is the whole rotation angle between them and ``phase`` 0."""
     q1 = np.asarray(q1, dtype=float)
@@ -190,9 +185,7 @@ def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int, L1=None, L2=None) 
     u1 = a1 - np.sum(a1 * l2, axis=-1, keepdims=True) * l2
     u2 = a2 - np.sum(a2 * l2, axis=-1, keepdims=True) * l2
     dpsi = _angle(u1, u2)
-    s = np.abs(np.sin(th2))
-    prec = dpsi * np.minimum(s / PRECESSION_SIN_MIN, 1.0)
-    return dL + np.abs(th1 - th2), np.maximum(twist, prec)
+    return dL + np.abs(th1 - th2), np.maximum(twist, dpsi * np.abs(np.sin(th2)))
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -171,7 +171,8 @@ def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bo
     acc = scene.accuracy
     om = spin_reach(scene, T) if reach is None else reach
     slip = field_rates(scene) + om  # (slip_bound, without a second spin_reach)
-    att_plan = planning_attitude(scene, om, T) if attitude else math.inf
+    # the Im part's error turns the phases and, through the rates, the axis' cone: the tighter of the two tolerances
+    att_plan = min(planning_attitude(scene, om, T), acc.attitude or math.inf) if attitude else math.inf
     tol_g, tol_im = mode_tolerances(acc.rtol, att_plan if math.isfinite(att_plan) else None, om, T)
     att_text = "none" if acc.attitude is None else f"{acc.attitude:g} rad"
     if cond is None or scene.torque_model != "lag" or scene.effects.magnetizable is not None:

@@ -147,8 +147,9 @@ def _plan_tolerances(scene, T: float, attitude: bool, omega: float) -> tuple[flo
     if not attitude:
         return tol_L, math.inf, math.inf, math.inf
     floor = PHASE_REL_MIN * omega * T
-    tol_q = math.inf if acc.attitude is None else STEP_SHARE * max(acc.attitude, floor)
     sym = has_symmetry_axis(scene.rotor.inertia)
+    # (the directions of an axisymmetric body are its axis' cone about L, no phase: no floor)
+    tol_q = math.inf if acc.attitude is None else STEP_SHARE * max(acc.attitude, 0.0 if sym else floor)
     tol_p = STEP_SHARE * max(phase_tolerance(acc, omega, T), floor) if sym else math.inf
     plan_q = STEP_SHARE * max(planning_attitude(scene, omega, T), floor)
     return tol_L, tol_q, tol_p, plan_q
