@@ -17,8 +17,9 @@ induced moment m_b = c(Σ w_n e_n − T_tail dB_b/dt) is a sum of exponentials (
 the field answered with the conductor's response χ(f) = c(−Σ_n w_n i f/(1/τ_n + i f) − T_tail i f)
 at its own body-frame frequency f, the free decay of the modes' initial mismatch on top), and so is
 the torque N = (R m_b) × B (case frame). Its integral ΔL = ∫N ds and its first moment
-∫(h − s)N ds (which gives the mean L̄ = L0 + (1/h)∫(h − s)N ds) are closed forms. Two passes: L̄ = L0,
-then L̄ from the first pass's moment.
+∫(h − s)N ds (which gives the mean L̄ = L0 + (1/h)∫(h − s)N ds) are closed forms. Three passes: L̄ = L0,
+then L̄ from the first pass's moment, then L̄* = L0 + (I2₁ + 2 I2₂)/(3h), the mean right to O(h³) (the first pass
+misses J_N N̄ h³/6 of ∫(h − s)N, the second has J_N N̄ h³/12 too much; as the quasi-static flow step's).
 
 The only approximation is the frozen L̄ inside the step: the rotation phase ∫Ω ds is right to
 second order (L̄ is the mean, not the midpoint value, so the fast start of a step, where the modes
@@ -453,7 +454,7 @@ def _case_pass(Lx, Ly, Lz, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, 
 @njit(cache=True)
 def frozen_flow_step_case(y, s, h, Bre, Bim, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out):
     """One frozen-flow step of length h (s) from phase time s for an isotropic rotor without attitude (in
-    place on y: L and the case-frame modes; y[3:7] untouched; see :func:`_case_pass`). Two passes as
+    place on y: L and the case-frame modes; y[3:7] untouched; see :func:`_case_pass`). Three passes as
     :func:`frozen_flow_step`; the modes end at e_n(h) = e^{−h/τ_n} Rot(l̂, Ω_p h)(e_n(0) − Re S_n) + Re E_end_n."""
     P = om.shape[0]
     for p in range(P):
@@ -463,8 +464,13 @@ def frozen_flow_step_case(y, s, h, Bre, Bim, om, J, lam, w, c_m, tail, nm, A, X,
             A[p, j] = (Bre[p, j] - 1j * Bim[p, j]) * e
     Lx, Ly, Lz = y[0], y[1], y[2]
     _case_pass(Lx, Ly, Lz, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out)
-    _case_pass(Lx + out[3] / h, Ly + out[4] / h, Lz + out[5] / h, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ,
+    a0, a1, a2 = out[3], out[4], out[5]
+    _case_pass(Lx + a0 / h, Ly + a1 / h, Lz + a2 / h, y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ,
                EO, S, E_end, out)
+    # the third pass at the mean of L right to O(h³), as frozen_flow_step's
+    _case_pass(Lx + (a0 + 2.0 * out[3]) / (3.0 * h), Ly + (a1 + 2.0 * out[4]) / (3.0 * h),
+               Lz + (a2 + 2.0 * out[5]) / (3.0 * h), y, h, om, J, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end,
+               out)
     y[0] = Lx + out[0]
     y[1] = Ly + out[1]
     y[2] = Lz + out[2]
