@@ -198,17 +198,16 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
     """The plan at the accuracy's own knobs (explicit knobs left out): what ``method: auto`` decides the stepper
     by (the choice follows the physics and the tolerance; the scene's knobs then set the chosen stepper's
     accuracy)."""
-    extra = dict(tol_p=plan.tol_p, plan_q=plan.plan_q)
     if not plan.explicit or "legacy" in plan.explicit:
         return plan if "legacy" not in plan.explicit else StepPlan(
             dict(LEGACY_STEPS_PER_TURN), LEGACY_RATE_CHANGE, plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
-            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE, **extra)
+            plan.explicit, qs_rate_change=LEGACY_RATE_CHANGE, tol_p=plan.tol_p, plan_q=plan.plan_q)
     omT = plan.turns * 2 * math.pi
     plan_L = _plan_L(plan.tol_L, plan.tol_q, plan.tol_p, omT, 1.0, has_symmetry_axis(scene.rotor.inertia))
     tol = (plan_L, 0.5 * plan.plan_q)
     spt = {m: _spt_for(m, plan.free_turns if m == "free" else plan.turns, *tol) for m in STEP_ERROR}
     return StepPlan(spt, _rate_change_for(plan.turns, *tol), plan.turns, plan.free_turns, plan.tol_L, plan.tol_q,
-                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol), **extra)
+                    qs_rate_change=_qs_rate_change_for(plan.turns, *tol), tol_p=plan.tol_p, plan_q=plan.plan_q)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -350,7 +349,8 @@ class ErrorControl:
         self.L_max = 0.0
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
-        self.prev = None  # (t, |ΔL|, direction error, phase error, error of |L|) now, at the previous check
+        # (t, |ΔL|, direction error, phase error, error of |L|) now, at the previous check
+        self.prev: Optional[tuple[float, float, float, float, float]] = None
         self.dLn = 0.0
         self.banked = (0.0, 0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
         self.history: list = []  # (t, e_L, e_q, e_p, step_div) at each check

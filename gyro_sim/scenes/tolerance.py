@@ -182,10 +182,10 @@ def phase_tolerance(acc, om: float, T: float) -> float:
     """Absolute tolerance (rad) on the spin phase of a run that turns at up to ``om`` rad/s for T s:
     ``accuracy.phase_atol`` where given, else ``accuracy.phase`` × ``om`` T (the phase turned), never tighter than
     ``accuracy.attitude`` (a phase error below the directions' tolerance is nothing an engineer sees: a spin-up from
-    rest turns through little phase at first); inf where none."""
+    rest turns through little phase at first); inf where none, and where ``attitude`` is null (only L matters)."""
     if acc.phase_atol is not None:
         return float(acc.phase_atol)
-    if acc.phase is None:
+    if acc.phase is None or acc.attitude is None:  # (attitude: null: only L matters, the phase with the rest)
         return math.inf
     return max(float(acc.phase) * max(om * T, 0.0), 0.0 if acc.attitude is None else float(acc.attitude))
 
