@@ -534,6 +534,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
+    if cfg.only == "cost":
+        from gyro_sim.apps.bench_cost import cost_part
+
+        cost_part(res, cfg.mode == "quick", _say)
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     if cfg.only == "estimate":
         from gyro_sim.apps.bench_estimate import estimate_part
 
@@ -588,6 +595,10 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         from gyro_sim.apps.bench_estimate import estimate_part
 
         estimate_part(res, cfg)
+    if cfg.cost:
+        from gyro_sim.apps.bench_cost import cost_part
+
+        cost_part(res, cfg.mode == "quick", _say)
     res.wall_total = time.perf_counter() - w0
     write_outputs(res, Path(out))
     return res
@@ -620,7 +631,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--startup-baseline", metavar="DIR",
                    help="a source tree of the code before (e.g. git archive of a commit): its start-up is timed beside "
                         "this code's, in the same run")
-    p.add_argument("--only", choices=["accuracy", "estimate", "ticks", "startup", "sweep"],
+    p.add_argument("--only", choices=["accuracy", "cost", "estimate", "ticks", "startup", "sweep"],
                    help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")
@@ -664,6 +675,10 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
 
         for line in est_headline(res.estimate):
             print("  " + line)
+    from gyro_sim.apps.bench_cost import headline as cost_headline
+
+    for line in cost_headline(res):
+        print("  " + line)
     print(f"wrote {args.out / 'bench.md'}, {args.out / 'bench.csv'}, {args.out / 'work_precision.png'} "
           f"({res.wall_total:.1f} s)")
     return 0

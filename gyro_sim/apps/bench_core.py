@@ -454,11 +454,12 @@ class BenchConfig:
     accuracy: bool = True  # the accuracy part (bench_accuracy): every built-in scene against its stated accuracy
     ticks: bool = True  # the per-tick part (bench_ticks): control ticks in-process, compiled against Python
     estimate: bool = False  # the estimate part (bench_estimate): each case's error estimate against its true error
+    cost: bool = False  # the cost part (bench_cost): the default scene's cost against its duration, old defaults beside
     accuracy_scenes: Optional[tuple] = None  # its scenes (None: every built-in scene)
     startup: bool = False  # the startup part (bench_scaling): new processes' import and first-run times
     startup_baseline: Optional[str] = None  # a source tree of the code before, timed beside this one
     sweep: bool = False  # the sweep part (bench_scaling): runs/s in-process, on 1 and 2 Dask workers
-    only: Optional[str] = None  # run this part alone ("accuracy", "estimate", "ticks", "startup", "sweep")
+    only: Optional[str] = None  # run this part alone ("accuracy", "cost", "estimate", "ticks", "startup", "sweep")
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -472,7 +473,7 @@ def quick_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
     return BenchConfig(mode="quick", scenes=tuple(scenes), default_horizon=0.2,
                        horizon={"spinup_thin_shell": 0.2, "spinup_solid_sphere": 0.2},
                        spt_ref=3072, mode_horizon=1.0, min_wall=0.1, max_reps=3, ros=True, startup=True, sweep=True,
-                       estimate=True)
+                       estimate=True, cost=True)
 
 
 def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
@@ -482,7 +483,7 @@ def full_config(scenes: Sequence[str] = DEFAULT_SCENES) -> BenchConfig:
                        horizon={"spinup_thin_shell": 2.0, "spinup_solid_sphere": 2.0},
                        spt_ref=3072, long_horizon_scenes=("spinup_thin_shell",), long_spt_ref=1536,
                        mode_horizon=10.0, mode_baseline_horizon=0.1, spinup_duration=1200.0,
-                       min_wall=0.3, max_reps=5, ros=True, startup=True, sweep=True, estimate=True)
+                       min_wall=0.3, max_reps=5, ros=True, startup=True, sweep=True, estimate=True, cost=True)
 
 
 # ----------------------------------------------------------------------------------------
@@ -512,6 +513,7 @@ class Results:
     sweep: list = field(default_factory=list)  # dicts of the sweep part (bench_scaling)
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     estimate: Optional[object] = None  # the estimate part (bench_estimate.EstResults)
+    cost: Optional[object] = None  # the cost part (bench_cost.CostResults)
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""

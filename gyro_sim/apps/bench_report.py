@@ -294,6 +294,9 @@ def markdown(res: Results) -> str:
     from gyro_sim.apps.bench_estimate import markdown_lines as estimate_markdown
 
     L += estimate_markdown(res)
+    from gyro_sim.apps.bench_cost import markdown_lines as cost_markdown
+
+    L += cost_markdown(res)
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"

@@ -1,0 +1,25 @@
+"""The benchmark's cost part (gyro_sim/apps/bench_cost.py): its rows, table and headline (not its timings)."""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+from gyro_sim.apps import bench_cost
+
+
+def test_cost_part_rows_table_and_headline(monkeypatch):
+    monkeypatch.setattr(bench_cost, "QUICK_DURATIONS", (0.2, 0.4))
+    res = SimpleNamespace()
+    said = []
+    out = bench_cost.cost_part(res, quick=True, say=said.append)
+    assert res.cost is out and len(out.rows) == 4 and len(said) == 4
+    assert [(r.duration, r.what) for r in out.rows] == [(0.2, "as shipped"), (0.2, "old defaults"),
+                                                       (0.4, "as shipped"), (0.4, "old defaults")]
+    for r in out.rows:
+        assert r.steps > 0 and r.cpu > 0 and "L " in r.estimate
+    shipped = [r for r in out.rows if r.what == "as shipped"]
+    assert all(r.met for r in shipped)  # (the old defaults run no error control: their estimate is the model's)
+    text = "\n".join(bench_cost.markdown_lines(res))
+    assert "## Cost against duration" in text and "| 0.4 | as shipped |" in text
+    assert math.isnan(bench_cost.linearity(out))  # (no duration of 20 s or more)
+    assert any("within" in line for line in bench_cost.headline(res))
