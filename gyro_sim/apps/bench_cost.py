@@ -100,7 +100,8 @@ def markdown_lines(res) -> list[str]:
     for r in cost.rows:
         lines.append(f"| {r.duration:g} | {r.what} | {r.steps} | {r.cpu:.3f} | {1e3 * r.cpu_per_s:.2f} | "
                      f"{r.realtime:.0f}x | {r.estimate} |")
-    lines += ["", f"CPU per simulated second, as shipped, from 20 s on: largest / smallest = {linearity(cost):.2f}.", ""]
+    lines += ["", f"CPU per simulated second, as shipped, from 20 s on: largest / smallest = {linearity(cost):.2f}.",
+              ""]
     return lines
 
 
