@@ -242,11 +242,14 @@ REFINE_MAX = 2.0
 EARLY_RHO = 4.0
 REFINE_MAX_EARLY = 2.0
 COARSEN = 2.0
+#: a refinement whose next check shows the projected error above this fraction of the one before did not pay: the
+#: control refines no further there (the growth is not the steps')
+REFINE_FUTILE = 0.7
 #: the PI step control's exponents over the order (Gustafsson 1991; Hairer & Wanner II, IV.2: α = 0.7, β = 0.4)
 PI_ALPHA = 0.7
 PI_BETA = 0.4
 MAX_COARSE = 8.0
-MAX_REFINE = 1e4
+MAX_REFINE = 64.0
 
 
 _EST_KEYS = ("L", "attitude", "steps_L", "steps_attitude", "modes_L", "modes_attitude", "averaged_L", "steps_method",
@@ -355,6 +358,8 @@ class ErrorControl:
         self.banked = (0.0, 0.0, 0.0)  # errors before a re-sync (fidelity hand-overs)
         self.history: list = []  # (t, e_L, e_q, e_p, step_div) at each check
         self.rho_prev: Optional[float] = None  # the last check's projected error over its budget (the PI control)
+        self.div_prev: Optional[float] = None  # the step_div of the last check
+        self.growth_prev: Optional[float] = None  # the errors' growth over their tolerances at the last check (1/s)
 
     @property
     def denom(self) -> float:
@@ -491,7 +496,14 @@ class ErrorControl:
         # PI control (Gustafsson 1991; Hairer & Wanner, IV.2): the factor follows the error's ratio to its target
         # and, damped, its trend since the previous check, so a run does not swing between too long and too short
         pi = (rho / 0.6) ** (PI_ALPHA / p) * ((rho / rho_prev) ** (PI_BETA / p) if rho_prev and rho > 0 else 1.0)
+        refined = self.div_prev is not None and main.step_div > 1.5 * self.div_prev
+        growth = max(new) / max(left, 1e-300)  # (the errors' growth per second over their tolerances)
+        growth_prev, self.div_prev, self.growth_prev = self.growth_prev, main.step_div, growth
         if rho > (EARLY_RHO if early else 1.0):  # (early checks project a short stretch far: they act on more)
+            if refined and growth_prev is not None and growth > REFINE_FUTILE * growth_prev and not early:
+                # the last refinement did not bring the error's growth down: it is not the steps' (an early error of
+                # L drifting the phases, a feedback law's switching); shorter steps would only cost
+                return None
             f = min(REFINE_MAX_EARLY if early else REFINE_MAX, max(pi, 1.0))
         elif rho < 0.3 and settled and not early:  # (coarser only on the regular checks' evidence)
             f = max(1.0 / COARSEN, min(pi, 1.0))
