@@ -31,9 +31,11 @@ def scene_result(name: str) -> dict:
     idx = np.unique(np.round(np.linspace(0, r.t.size - 1, CHECKPOINTS + 1)[1:]).astype(int))
     q = getattr(r, "q", None)
     has_q = q is not None and np.all(np.isfinite(q[idx]))
+    est = r.error_estimate
     return {"t": r.t[idx].tolist(), "L": r.L[idx].tolist(), "L_max": float(np.max(np.linalg.norm(r.L, axis=1))),
             "q": q[idx].tolist() if has_q else None, "rtol": scene.accuracy.rtol,
-            "attitude": scene.accuracy.attitude}
+            "attitude": scene.accuracy.attitude,
+            "phase_tol": float(est.phase_tol) if est is not None and est.phase_tol == est.phase_tol else None}
 
 
 def attitude_angle(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:

@@ -454,8 +454,8 @@ class ErrorControl:
         self.prev = (t, dL, dq, dp, dLn)
         if not self.adapt or method not in ORDER or t <= t0:
             return None
-        if not measurable:  # back to a step the shadow can measure against (never coarser here)
-            return 1.0 / main.step_div if main.step_div < 1.0 else None
+        if not measurable and main.step_div < 1.0:  # back to a step the shadow can measure against
+            return 1.0 / main.step_div
         plan, left = self.plan, self.T - t
         early = t < self.T / 16 * (1 - 1e-12)
         L_ref = max(self.L_max, self.L_bound, 1e-300)
@@ -496,6 +496,14 @@ class ErrorControl:
         # PI control (Gustafsson 1991; Hairer & Wanner, IV.2): the factor follows the error's ratio to its target
         # and, damped, its trend since the previous check, so a run does not swing between too long and too short
         pi = (rho / 0.6) ** (PI_ALPHA / p) * ((rho / rho_prev) ** (PI_BETA / p) if rho_prev and rho > 0 else 1.0)
+        if not measurable:
+            # the breaks cut the run's steps and the shadow's alike (ticks, commands): never coarser here, and where
+            # the error grows beyond its budget shorter, until the run's steps are shorter than the breaks and the
+            # shadow can measure again
+            if rho <= 1.0 or early:
+                return None
+            div = min(MAX_REFINE, main.step_div * 2.0)
+            return None if div == main.step_div else div / main.step_div
         refined = self.div_prev is not None and main.step_div > 1.5 * self.div_prev
         growth = max(new) / max(left, 1e-300)  # (the errors' growth per second over their tolerances)
         growth_prev, self.div_prev, self.growth_prev = self.growth_prev, main.step_div, growth
