@@ -40,7 +40,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.physics.frames import quat_to_matrix, symmetry_axis
 from gyro_sim.compiled.kernels import _equal_steps, _pause, _resume_at, _rotl, _steps_now, record_sample
 
 __all__ = ["integrate_frozen", "frozen_flow_step", "frozen_flow_step_case", "steady_modes", "supported",
@@ -49,14 +49,9 @@ __all__ = ["integrate_frozen", "frozen_flow_step", "frozen_flow_step_case", "ste
 
 def supported(J: np.ndarray) -> int:
     """Index (0, 1, 2) of the symmetry axis of principal moments ``J`` (2 for an isotropic body), −1 if
-    triaxial (the frozen-flow step needs the free motion in closed form)."""
-    if J[0] == J[1]:
-        return 2
-    if J[1] == J[2]:
-        return 0
-    if J[0] == J[2]:
-        return 1
-    return -1
+    triaxial (the frozen-flow step needs the free motion in closed form): :func:`gyro_sim.physics.frames.
+    symmetry_axis`."""
+    return symmetry_axis(J)
 
 
 #: the local torque scale is taken no smaller than this fraction of the bound at the largest slip: a frozen-flow

@@ -75,7 +75,7 @@ class Runner:
             estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
         self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
                                     J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound,
-                                    axis=symmetry_axis(self.sim.J))
+                                    axis=symmetry_axis(self.sim.J), accuracy=scene.accuracy)
         self.shadow = None
         if estimate:
             self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
@@ -259,8 +259,7 @@ class Runner:
             n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
             self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
-            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, turned=self._turned,
-                                   accuracy=self.scene.accuracy)
+            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, turned=self._turned)
             if f is not None:
                 sim.step_div *= f
             if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
@@ -291,8 +290,7 @@ class Runner:
         shadow afresh from the run's state."""
         if self.shadow is None:
             return
-        sim = self.sim
-        sh = self.shadow
+        sim, sh = self.sim, self.shadow
         self.control.measure(sim, sh)
         self.control.bank()
         sh.y[:] = sim.y
@@ -336,7 +334,7 @@ class Runner:
         n = max(sim.steps, 1)
         ro = ROUND_OFF * (self._turned * (1.0 + math.sqrt(n)) + n) if att else 0.0
         sym = symmetry_axis(sim.J) >= 0
-        phase_tol = phase_tolerance(acc, self._turned / max(self.T, 1e-300), self.T) if sym else math.nan
+        phase_tol = phase_tolerance(acc, 1.0, self._turned) if sym else math.nan
         return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq + ro) if att else math.nan, steps_L=sL,
                              steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
                              averaged_L=aL, steps_method=how, rtol=acc.rtol,

@@ -50,6 +50,14 @@ STEPS_WARN = 1e8
 #: default scene over 30 000 s at its default accuracy plans 1.7e9 steps; with ``accuracy.attitude: null``, 4e6)
 STEP_BUDGET = 1e9
 
+#: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
+SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
+SPT_MAX = 100000  # the scene format's limit of steps_per_turn
+#: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
+RATE_CHANGE_MAX = 2e-4
+QS_RATE_CHANGE_MAX = 1e-2
+RATE_CHANGE_MIN = 1e-9
+
 
 class StepBudgetError(SceneError):
     """A run refused before it starts: its plan exceeds :data:`STEP_BUDGET` (the message, one line, says what to
@@ -58,13 +66,6 @@ class StepBudgetError(SceneError):
     def __init__(self, message: str, planned: float = math.nan, budget: float = STEP_BUDGET):
         super().__init__(message)
         self.planned, self.budget = float(planned), float(budget)
-#: fewest steps per turn a plan takes (below, lawson8 and ETDRK4 leave their asymptotic range; docs/numerics.md)
-SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
-SPT_MAX = 100000  # the scene format's limit of steps_per_turn
-#: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
-RATE_CHANGE_MAX = 2e-4
-QS_RATE_CHANGE_MAX = 1e-2
-RATE_CHANGE_MIN = 1e-9
 
 
 @dataclass(frozen=True)
@@ -254,6 +255,8 @@ MAX_REFINE = 64.0
 
 _EST_KEYS = ("L", "attitude", "steps_L", "steps_attitude", "modes_L", "modes_attitude", "averaged_L", "steps_method",
              "rtol", "atol", "phase", "steps_phase", "modes_phase", "phase_tol", "round_off")
+#: the keys every bag's estimate has (those after them came with the spin phase apart, issue 28: NaN where missing)
+_EST_REQUIRED = _EST_KEYS[:10]
 
 
 @dataclass
@@ -308,8 +311,7 @@ class ErrorEstimate:
         import json
 
         d = json.loads(text)
-        return cls(**{k: (math.nan if d.get(k) is None else d[k]) for k in _EST_KEYS
-                      if k in d or k in _EST_KEYS[:10]})
+        return cls(**{k: (math.nan if d.get(k) is None else d[k]) for k in _EST_KEYS if k in d or k in _EST_REQUIRED})
 
     def text(self) -> str:
         """One line: ``L 3.1e-07 (rtol 1e-06), attitude 2.2e-07 rad (1e-06), spin phase 4e-06 rad (1.2e-04)``."""
@@ -341,10 +343,11 @@ class ErrorControl:
     """
 
     def __init__(self, plan: StepPlan, attitude: bool, T: float, adapt: bool, J_min: float = 1.0,
-                 L_bound: float = 0.0, axis: int = -1):
+                 L_bound: float = 0.0, axis: int = -1, accuracy=None):
         self.plan, self.attitude, self.T, self.adapt, self.J_min = plan, attitude, T, adapt, J_min
         self.L_bound = L_bound  # the largest |L| the run can reach (N m s): the scale of L's relative error ahead
         self.axis = axis  # the body's symmetry axis (frames.symmetry_axis; −1: none, the whole attitude)
+        self.accuracy = accuracy  # the scene's accuracy section (a relative phase tolerance follows the phase turned)
         self.checks = np.array(sorted({float(T * f) for f in CHECKS if 0 < T * f < T}))
         self.dL = 0.0  # largest error of L (N m s)
         self.e_q = 0.0  # directions, rad
@@ -441,12 +444,12 @@ class ErrorControl:
         return div
 
     def check(self, t: float, main, shadow, method: str, torque_now: float = 1.0, torque_mean: float = 1.0,
-              measurable: bool = True, turned: Optional[float] = None, accuracy=None) -> Optional[float]:
+              measurable: bool = True, turned: Optional[float] = None) -> Optional[float]:
         """At a check instant: measure, and return the factor to divide the step by (None: unchanged).
         ``torque_now`` / ``torque_mean``: |N| now and its mean since the previous check (errors are made in
         proportion to the torque: the growth ahead is projected at today's torque); ``measurable``: whether the
         shadow's steps were longer than the run's since the previous check (else the error made was not seen, and
-        the step is not made longer)."""
+        the step is not made longer); ``turned``: the phase the run has turned so far (rad)."""
         dL, dq, dp, e_L, e_q, e_p = self.measure(main, shadow)
         dLn = self.dLn
         self.history.append((t, e_L, e_q, e_p, main.step_div))
@@ -468,16 +471,16 @@ class ErrorControl:
             # the error of |L| turns the spin and precession rates: the phases drift at it over J from now on (the
             # whole attitude without a symmetry axis; the cone of an axisymmetric rotor's axis does not drift so)
             rate_Ln = scale * max(dLn - dLn0, 0.0) / (t - t0)
-            sth = 1.0 if self.axis < 0 else 0.0
+            k_cone = 1.0 if self.axis < 0 else 0.0
             tol_p = plan.tol_p
-            if (turned is not None and accuracy is not None and accuracy.phase_atol is None and math.isfinite(tol_p)
-                    and not early):
+            acc = self.accuracy
+            if turned is not None and acc is not None and acc.phase_atol is None and math.isfinite(tol_p) and not early:
                 # a relative phase tolerance follows the phase the run turns: so far, and ahead at today's rate (the
                 # plan's took the fastest rate the run can reach over all of it; the early checks, where a spin-up
                 # has turned little, keep the plan's)
                 om_now = float(np.linalg.norm(main.y[0:3])) / self.J_min
-                tol_p = min(tol_p, STEP_SHARE * phase_tolerance(accuracy, 1.0, turned + om_now * left))
-            for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, sth), (tol_p, e_p, dp, dp0, 1.0)):
+                tol_p = min(tol_p, STEP_SHARE * phase_tolerance(acc, 1.0, turned + om_now * left))
+            for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, k_cone), (tol_p, e_p, dp, dp0, 1.0)):
                 if not math.isfinite(tol):
                     continue
                 drift, drift0 = k * dLn / self.J_min, k * dLn0 / self.J_min

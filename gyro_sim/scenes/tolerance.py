@@ -10,6 +10,7 @@ import numpy as np
 
 from gyro_sim.physics.conductor import (shell_tau_eff)
 from gyro_sim.physics.constants import MU0
+from gyro_sim.physics.frames import symmetry_axis
 
 
 #: default relative tolerance on L over the whole run
@@ -174,8 +175,7 @@ def slip_bound(scene, T: float) -> float:
 # --------------------------------------------------------------------------------------------------
 def has_symmetry_axis(J) -> bool:
     """Whether principal moments J have two equal (an axisymmetric or isotropic body: a spin phase apart)."""
-    J0, J1, J2 = (float(v) for v in J)
-    return J0 == J1 or J1 == J2 or J0 == J2
+    return symmetry_axis(J) >= 0
 
 
 def phase_tolerance(acc, om: float, T: float) -> float:
@@ -187,7 +187,7 @@ def phase_tolerance(acc, om: float, T: float) -> float:
         return float(acc.phase_atol)
     if acc.phase is None or acc.attitude is None:  # (attitude: null: only L matters, the phase with the rest)
         return math.inf
-    return max(float(acc.phase) * max(om * T, 0.0), 0.0 if acc.attitude is None else float(acc.attitude))
+    return max(float(acc.phase) * max(om * T, 0.0), float(acc.attitude))
 
 
 def planning_attitude(scene, om: float, T: float) -> float:
