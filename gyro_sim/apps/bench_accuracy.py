@@ -119,6 +119,17 @@ def _load(name: str, T: float, **over):
     return load_scene(name, overrides={"duration": T, **over})
 
 
+def reference_stepper(sim, T: float) -> tuple[str, int]:
+    """(stepper, steps per turn) of a converged reference of simulator ``sim``'s scene over T s: lawson8 at
+    :data:`REF_SPT_LAWSON` steps per turn, more where a mode asks (h ≤ τ_min/2), up to 1024; beyond that ETDRK4 at
+    :data:`REF_SPT_ETD` (a stiff mode). The estimate part's references take it too (bench_estimate)."""
+    om = sim.step_plan.turns * 2 * math.pi / T if T > 0 else 0.0
+    spt = REF_SPT_LAWSON
+    if om > 0 and math.isfinite(sim.tau_min):
+        spt = max(spt, math.ceil(2 * math.pi / (om * 0.5 * sim.tau_min)))
+    return ("lawson8", spt) if spt <= 1024 else ("etdrk4", REF_SPT_ETD)
+
+
 def reference(name: str, T: float) -> tuple[object, dict]:
     """The converged reference run of scene ``name`` over T s (see the module docstring) and its description."""
     from gyro_sim.scenes.accuracy import mode_plan
@@ -136,11 +147,7 @@ def reference(name: str, T: float) -> tuple[object, dict]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = Simulator(_load(name, T, **({"modes": n_ref} if n_ref else {})), attitude=True, quiet=True)
-    om = sim.step_plan.turns * 2 * math.pi / T if T > 0 else 0.0
-    spt_l8 = REF_SPT_LAWSON
-    if om > 0 and math.isfinite(sim.tau_min):
-        spt_l8 = max(spt_l8, math.ceil(2 * math.pi / (om * 0.5 * sim.tau_min)))
-    method, spt = ("lawson8", spt_l8) if spt_l8 <= 1024 else ("etdrk4", REF_SPT_ETD)
+    method, spt = reference_stepper(sim, T)
 
     def go(k):
         integ = {"method": method, "steps_per_turn": int(k)}

@@ -6,10 +6,11 @@ error control's shadow run on) and compares its reported estimate (``RunResult.e
 error against a converged reference of the same scene (same commands, same controller law):
 
 * the reference: the eddy modes of ``accuracy: {rtol: 1e-11, attitude: 1e-9}`` (thick conductors), lawson8 at
-  :data:`REF_SPT` steps per turn (more where a mode asks: h ≤ τ_min/2), else ETDRK4 at :data:`REF_SPT_ETD`, without
-  shadow run; and the same at twice the steps per turn, doubled again (at most :data:`REF_DOUBLINGS` times) until
-  two agree to :data:`REF_TARGET`. The finer is the reference, the difference of the last two (the coarser's
-  error) its own error ``ref`` (L relative, attitude rad): a true error within :data:`REF_FLOOR` × ref of
+  64 steps per turn (more where a mode asks: h ≤ τ_min/2), else ETDRK4 at 2048 (the accuracy part's choice,
+  :func:`gyro_sim.apps.bench_accuracy.reference_stepper`), without shadow run; and the same at twice the steps
+  per turn, doubled again (at most :data:`REF_DOUBLINGS` times) until two agree to :data:`REF_TARGET`. The finer
+  is the reference, the difference of the last two (the coarser's error) its own error ``ref`` (L relative,
+  attitude rad): a true error within :data:`REF_FLOOR` × ref of
   it is the reference's, not the run's. A torque-free triaxial rotor takes the exact Jacobi solution
   (:func:`gyro_sim.physics.closed_forms.free_rigid_body`) instead (``ref`` 0);
 * the true error, split three ways (max over the output samples): L relative (|L − L_ref| / max |L_ref|); the
@@ -38,11 +39,9 @@ import numpy as np
 
 __all__ = ["CASES", "Case", "EstRow", "estimate_part", "markdown_lines", "csv_rows", "write_csv", "headline"]
 
-REF_SPT = 64  # lawson8 steps per turn of the reference (doubled: the check)
 #: the reference's steps are doubled until two agree to this (L relative, attitude rad), at most REF_DOUBLINGS times
 REF_TARGET = 1e-11
 REF_DOUBLINGS = 3
-REF_SPT_ETD = 2048  # ETDRK4 where lawson8 would need more than 1024 (a stiff mode)
 REF_FLOOR = 3.0  # a true error within this factor of the reference's own error is the reference's
 ROUNDOFF = 1e-14  # relative floor of L's and the attitude's round-off per sample (× the phase for the attitude)
 OVER = 10.0  # the estimate's allowed excess over the true error
@@ -91,25 +90,15 @@ _CASES: list = []
 for _tol in (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9):
     _CASES.append(Case("default scene (spin-up law on)", "spinup_thin_shell", _ov(duration=2.0), _tol))
 _CASES += [
-    # open loop, commands every 0.5 ms: a current square wave on z1 beside the spin field; a rate square wave on z3
-    Case("z1 current square wave every 0.5 ms", "spinup_thin_shell",
+    # open loop, commands every 0.5 ms: a current square wave on z1 beside the spin field, a rate square wave on z3,
+    # the spin field on and off; each at 1e-6 and 1e-3
+    Case(label, "spinup_thin_shell",
          _dotted({**_OPEN, "duration": _CMD_T, "initial.spin": 1500.0,
-                  "commands": _square_wave("z1", "current", 0.5, 0.0, 5e-4, _CMD_T)}), 1e-6),
-    Case("z1 current square wave every 0.5 ms", "spinup_thin_shell",
-         _dotted({**_OPEN, "duration": _CMD_T, "initial.spin": 1500.0,
-                  "commands": _square_wave("z1", "current", 0.5, 0.0, 5e-4, _CMD_T)}), 1e-3),
-    Case("z3 rate square wave every 0.5 ms", "spinup_thin_shell",
-         _dotted({**_OPEN, "duration": _CMD_T, "initial.spin": 1500.0,
-                  "commands": _square_wave("z3", "rate", 0.5 * _W3, _W3, 5e-4, _CMD_T)}), 1e-6),
-    Case("z3 rate square wave every 0.5 ms", "spinup_thin_shell",
-         _dotted({**_OPEN, "duration": _CMD_T, "initial.spin": 1500.0,
-                  "commands": _square_wave("z3", "rate", 0.5 * _W3, _W3, 5e-4, _CMD_T)}), 1e-3),
-    Case("z3 current (spin field) on/off every 0.5 ms", "spinup_thin_shell",
-         _dotted({**_OPEN, "duration": _CMD_T, "initial.spin": 1500.0,
-                  "commands": _square_wave("z3", "current", 0.0, 1.0, 5e-4, _CMD_T)}), 1e-6),
-    Case("z3 current (spin field) on/off every 0.5 ms", "spinup_thin_shell",
-         _dotted({**_OPEN, "duration": _CMD_T, "initial.spin": 1500.0,
-                  "commands": _square_wave("z3", "current", 0.0, 1.0, 5e-4, _CMD_T)}), 1e-3),
+                  "commands": _square_wave(stator, what, a, b, 5e-4, _CMD_T)}), tol)
+    for label, stator, what, a, b in (("z1 current square wave every 0.5 ms", "z1", "current", 0.5, 0.0),
+                                      ("z3 rate square wave every 0.5 ms", "z3", "rate", 0.5 * _W3, _W3),
+                                      ("z3 current (spin field) on/off every 0.5 ms", "z3", "current", 0.0, 1.0))
+    for tol in (1e-6, 1e-3)
 ]
 # closed-loop ψ-switching (control at 1 kHz)
 for _name in ("nutation_oblate", "nutation_prolate"):
@@ -313,6 +302,7 @@ def _exact_free(scene, T: float, r) -> tuple:
 
 def reference(case: Case, say=print) -> dict:
     """The converged reference of the case's scene (module docstring): {t, L, q, ref_L, ref_att, cpu, how}."""
+    from gyro_sim.apps.bench_accuracy import reference_stepper
     from gyro_sim.engine.simulate import Simulator, run
     from gyro_sim.scenes.modal_truncation import mode_plan
 
@@ -334,11 +324,7 @@ def reference(case: Case, say=print) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = Simulator(_load(case, **mo), attitude=True, quiet=True)
-    om = sim.step_plan.turns * 2 * math.pi / T if T > 0 else 0.0
-    spt = REF_SPT
-    if om > 0 and math.isfinite(sim.tau_min):
-        spt = max(spt, math.ceil(2 * math.pi / (om * 0.5 * sim.tau_min)))
-    method, spt = ("lawson8", spt) if spt <= 1024 else ("etdrk4", REF_SPT_ETD)
+    method, spt = reference_stepper(sim, T)
 
     def go(k):
         sc = _load(case, integrator={"method": method, "steps_per_turn": int(k)}, **mo)
