@@ -172,12 +172,14 @@ def test_estimate_is_reported_everywhere(tmp_path):
 
 
 def test_steps_follow_the_tolerance_and_explicit_knobs_win_with_a_warning():
-    s6 = load_scene("rotating_field", overrides={"duration": 2.0})
+    # (at the default 1e-6 the plan of rotating_field is at lawson8's floor of 8 steps per turn, as at 1e-3)
+    s6 = load_scene("rotating_field", overrides={"duration": 2.0, "accuracy": {"rtol": 1e-9, "attitude": 1e-9}})
     s3 = load_scene("rotating_field", overrides={"duration": 2.0, "accuracy": {"rtol": 1e-3, "attitude": 1e-3}})
     p6, p3 = Simulator(s6).step_plan, Simulator(s3).step_plan
     assert p6.steps_per_turn["lawson8"] > p3.steps_per_turn["lawson8"] and p6.rate_change <= p3.rate_change
     s = load_scene("rotating_field", overrides={"duration": 2.0, "integrator": {"method": "lawson8",
-                                                                              "steps_per_turn": 8}})
+                                                                              "steps_per_turn": 8},
+                                                "accuracy": {"rtol": 1e-9, "attitude": 1e-9}})
     with pytest.warns(AccuracyWarning, match="steps_per_turn = 8 cannot meet accuracy"):
         r = run(s)
     assert r.error_estimate is not None
@@ -199,8 +201,9 @@ def test_estimate_within_a_factor_ten_of_the_error(name, T):
           f"{est.attitude:.2e}, {est.phase:.2e} (ratios {est.L / eL:.2g}, {est.attitude / eq:.2g}, "
           f"{est.phase / ep:.2g}; within a factor 10 asked); {n} samples")
     assert eq <= s_tol(r) and eL <= r.scene.accuracy.rtol and ep <= est.phase_tol
-    # (constant_field's stiff ETDRK4 stretches are estimated at order 1, an upper bound: 16x its phase measured)
-    assert 0.5 <= est.phase / ep <= (20 if name == "constant_field" else 10)  # (rotating_field: 0.8)
+    # (constant_field's stiff ETDRK4 stretches are estimated at order 1, an upper bound: 16x its phase measured with
+    # the absolute phase; 26x with the phase relative to itself, its steps 716 instead of 1,721)
+    assert 0.5 <= est.phase / ep <= (30 if name == "constant_field" else 10)  # (rotating_field: 0.8)
     # the directions (the axis' cone about L) the steps hold far closer than the phases: where they are at the
     # reference's own level the ratio says nothing; else within the factor
     assert eq < 1e-11 or 0.1 <= est.attitude / eq <= 10
@@ -212,11 +215,12 @@ def s_tol(r):
 
 def _errors_against(r, ref, split: bool = False):
     """(max relative error of L, max attitude error rad) of run r against ref on the same samples; ``split``: the
-    attitude's as (directions, spin phase) (frames.attitude_split), the tolerances' terms."""
+    attitude's as (directions, phases) (frames.attitude_split with L: the axis' cone about L, and the spin phase or the
+    axis' place on its cone), the tolerances' terms."""
     d = np.minimum(np.linalg.norm(r.q - ref.q, axis=1), np.linalg.norm(r.q + ref.q, axis=1))
     eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1)) / np.max(np.linalg.norm(ref.L, axis=1)))
     if split:
-        di, ph = attitude_split(r.q, ref.q, symmetry_axis(r.scene.rotor.inertia))
+        di, ph = attitude_split(r.q, ref.q, symmetry_axis(r.scene.rotor.inertia), r.L, ref.L)
         return eL, float(np.max(di)), float(np.max(ph))
     return eL, float(np.max(4 * np.arcsin(d / 2)))
 

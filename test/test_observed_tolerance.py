@@ -47,9 +47,9 @@ def test_attitude_split_separates_the_axis_from_the_spin_phase():
 
 def test_the_accuracy_section_takes_phase_and_phase_atol():
     s = load_scene("spinup_thin_shell")
-    assert s.accuracy.phase == 1e-9 and s.accuracy.phase_atol is None
-    s = load_scene("spinup_thin_shell", overrides={"accuracy": {"phase": 1e-7, "phase_atol": 1e-3}})
-    assert s.accuracy.phase == 1e-7 and s.accuracy.phase_atol == 1e-3
+    assert s.accuracy.phase == 1e-7 and s.accuracy.phase_atol is None
+    s = load_scene("spinup_thin_shell", overrides={"accuracy": {"phase": 1e-9, "phase_atol": 1e-3}})
+    assert s.accuracy.phase == 1e-9 and s.accuracy.phase_atol == 1e-3
     with pytest.raises(SceneError, match="phase"):
         load_scene("spinup_thin_shell", overrides={"accuracy": {"phase": -1.0}})
 
@@ -72,10 +72,10 @@ def _shipped_and_reference(T: float):
 
 @pytest.mark.parametrize("T", [2.0, 60.0])
 def test_default_scene_meets_its_tolerances_and_estimates_each_honestly(T):
-    """The default scene as shipped against a converged frozen-flow reference (rate_change 2e-6, 100x below the
+    """The default scene as shipped against a converged frozen-flow reference (rate_change 2e-6, 500x below the
     run's): L, the symmetry axis' direction and the spin phase each within the scene's tolerance, and the run's
     estimate of each at least the error measured and at most ten times it. Measured (2 s / 60 s): estimate over
-    true 1.7 / 6.5 (L), 2.4 / 6.5 (directions), 1.7 / 6.6 (phase)."""
+    true 3.5 / 5.3 (L), 3.9 / 1.3 (directions), 2.2 / 5.2 (phase)."""
     r, ref = _shipped_and_reference(T)
     est = r.error_estimate
     eL, ed, ep = _errors(r, ref)
@@ -87,9 +87,11 @@ def test_default_scene_meets_its_tolerances_and_estimates_each_honestly(T):
     for true, e in ((eL, est.L), (ed, est.attitude), (ep, est.phase)):
         assert true <= e <= 10.0 * true, (true, e)
     if T == 60.0:
-        # the spin phase held relative to itself: a fifth of the steps the absolute 1e-6 rad took (162,421)
-        assert r.steps < 60_000
-        assert est.phase_tol > 1e-5  # 1e-9 of ~5e4 rad turned
+        # the spin phase held relative to itself (1e-7 of ~5e4 rad turned), the shadow free to step over the ticks
+        # whose commands change nothing: issue 28's bound of 6,000 steps (3,203 measured; the absolute 1e-6 rad
+        # took 162,421, the shadow stopped at every tick 6,006)
+        assert r.steps <= 6000
+        assert est.phase_tol > 1e-3
 
 
 def test_an_absolute_phase_is_held_on_request():
@@ -105,3 +107,24 @@ def test_an_absolute_phase_is_held_on_request():
     report("2 s, phase_atol 2e-8: spin phase (rad)", ep, 2e-8)
     assert est.phase_tol == 2e-8 and est.met and ep <= 2e-8 <= est.phase_tol
     assert math.isfinite(est.phase) and est.phase >= ep
+
+
+def test_the_error_controls_scalar_split_is_the_vector_one():
+    """frames.attitude_split_one (the error control's, at each check) gives attitude_split's numbers: 3,000 random
+    pairs of states from equal to far apart, every axis; agreement to round-off (measured: 8.9e-16 rad)."""
+    from gyro_sim.physics.frames import attitude_split_one
+
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for _ in range(3000):
+        q1 = rng.normal(size=4)
+        q1 /= np.linalg.norm(q1)
+        q2 = q1 + rng.normal(size=4) * 10 ** rng.uniform(-9, 0)
+        q2 /= np.linalg.norm(q2)
+        L1 = rng.normal(size=3)
+        L2 = L1 + rng.normal(size=3) * 10 ** rng.uniform(-9, 0)
+        ax = int(rng.integers(-1, 3))
+        for a, b in zip(attitude_split(q1, q2, ax, L1, L2), attitude_split_one(q1, q2, ax, L1, L2), strict=True):
+            worst = max(worst, abs(float(a) - b))
+    report("scalar split against the vector one (rad)", worst, 1e-14)
+    assert worst <= 1e-14

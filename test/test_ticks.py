@@ -187,9 +187,12 @@ RUNS = [
     ("spinup_thin_shell", {}, 1.0, {"estimate": False}),  # no shadow
     ("nutation_oblate", {}, 0.5, {}),  # ψ-switching every 1 ms
     ("nutation_oblate", {"controller.period": 0.004, "output.rate": 1000.0}, 0.5, {}),  # samples between ticks
-    # [K] averaged, then the full model (lawson8: auto takes qs_flow there since the tolerances' split, whose ticks
-    # are not compiled)
+    # [K] averaged, then the full model (lawson8)
     ("nutation_slow", {"fidelity": "auto", "accuracy.rtol": 2e-3, "integrator.method": "lawson8"}, None, {}),
+    # the quasi-static flow step (qs_flow) under ψ-switching and under the spin-up law: its ticks compiled since
+    # issue 28 (the Python loop ran them: 3.2x the CPU on nutation_slow)
+    ("nutation_slow", {}, 2.0, {}),
+    ("spinup_thin_shell", {"torque_model": "quasi_static"}, 2.0, {}),
 ]
 
 

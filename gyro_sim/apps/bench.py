@@ -541,6 +541,13 @@ def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
+    if cfg.only == "rk4":
+        from gyro_sim.apps.bench_rk4 import rk4_part
+
+        rk4_part(res, cfg.mode == "quick", _say)
+        res.wall_total = time.perf_counter() - w0
+        write_outputs(res, Path(out))
+        return res
     if cfg.only == "estimate":
         from gyro_sim.apps.bench_estimate import estimate_part
 
@@ -631,7 +638,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--startup-baseline", metavar="DIR",
                    help="a source tree of the code before (e.g. git archive of a commit): its start-up is timed beside "
                         "this code's, in the same run")
-    p.add_argument("--only", choices=["accuracy", "cost", "estimate", "ticks", "startup", "sweep"],
+    p.add_argument("--only", choices=["accuracy", "cost", "estimate", "rk4", "ticks", "startup", "sweep"],
                    help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")
@@ -678,6 +685,10 @@ def bench_main(argv: Optional[Sequence[str]] = None) -> int:
     from gyro_sim.apps.bench_cost import headline as cost_headline
 
     for line in cost_headline(res):
+        print("  " + line)
+    from gyro_sim.apps.bench_rk4 import headline as rk4_headline
+
+    for line in rk4_headline(res):
         print("  " + line)
     print(f"wrote {args.out / 'bench.md'}, {args.out / 'bench.csv'}, {args.out / 'work_precision.png'} "
           f"({res.wall_total:.1f} s)")

@@ -459,7 +459,7 @@ class BenchConfig:
     startup: bool = False  # the startup part (bench_scaling): new processes' import and first-run times
     startup_baseline: Optional[str] = None  # a source tree of the code before, timed beside this one
     sweep: bool = False  # the sweep part (bench_scaling): runs/s in-process, on 1 and 2 Dask workers
-    only: Optional[str] = None  # run this part alone ("accuracy", "cost", "estimate", "ticks", "startup", "sweep")
+    only: Optional[str] = None  # run this part alone (bench --only's choices)
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 
@@ -514,6 +514,7 @@ class Results:
     accuracy: Optional[object] = None  # the accuracy part (bench_accuracy.AccResults)
     estimate: Optional[object] = None  # the estimate part (bench_estimate.EstResults)
     cost: Optional[object] = None  # the cost part (bench_cost.CostResults)
+    rk4: Optional[object] = None  # the RK4 part (bench_rk4.Rk4Results)
     notes: list = field(default_factory=list)
     started: str = ""
     command: str = ""

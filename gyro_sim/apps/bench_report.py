@@ -297,6 +297,9 @@ def markdown(res: Results) -> str:
     from gyro_sim.apps.bench_cost import markdown_lines as cost_markdown
 
     L += cost_markdown(res)
+    from gyro_sim.apps.bench_rk4 import markdown_lines as rk4_markdown
+
+    L += rk4_markdown(res)
     if res.notes:
         L += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     return "\n".join(L) + "\n"

@@ -161,6 +161,5 @@ def markdown_lines(res) -> list:
                   [_row(v) for v in res.ticks],
                   [summary + ".", "Both loops call the compiled law (gyro_ctl/law_kernels.py); the Python loop before "
                    "issue 23 also ran the laws in Python (scripts/tick_cost.py compares two versions of the code). "
-                   "Without the controller the shadow run of the error control stops only at its checks, with it at "
-                   "every tick too: where the steps are as long as the ticks (accuracy of L alone) the shadow takes "
-                   "that many more steps."])
+                   "The shadow run of the error control stops at its checks and where a command changes what a stator "
+                   "does, not at the ticks whose commands change nothing."])

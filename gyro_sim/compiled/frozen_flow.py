@@ -61,36 +61,53 @@ LOCAL_SCALE_MIN = 1e-4
 
 def torque_scale(Bre, Bim, om, L, Jt, Ja, e_a, c_m, w, tau, tail) -> float:
     """The size (N m) of the mean torque the field gives at the present slips, for the frozen-flow step: with the
-    body turning about l̂ = L/|L| at Ω_p = |L|/J_t and about its axis e_a (case frame) at Ω_r = (1/J_a − 1/J_t) L·e_a
-    (the free motion of the module docstring), the part P_m(l̂) a of each phasor a (``Bre`` − i ``Bim``, T, rate
-    ``om`` rad/s) meets the conductor at the body-frame frequencies f = ν − m Ω_p − m₂ Ω_r (m, m₂ ∈ {−1, 0, 1}),
-    where its dissipative response is g(f) = Σ_n |w_n| |f|τ_n/(1 + (fτ_n)²) + T_tail|f| (at most ½Σ|w_n| + T_tail|f|:
-    the bound :meth:`gyro_sim.simulate.Simulator._torque_time` takes at the largest slip). Returns
+    body turning about l̂ = L/|L| at Ω_p = |L|/J_t and about its axis e_a (case frame; None: isotropic) at
+    Ω_r = (1/J_a − 1/J_t) L·e_a (the free motion of the module docstring), the part P_m(l̂) a of each phasor a
+    (``Bre`` − i ``Bim``, T, rate ``om`` rad/s) meets the conductor at the body-frame frequencies
+    f = ν − m Ω_p − m₂ Ω_r (m, m₂ ∈ {−1, 0, 1}), where its dissipative response is
+    g(f) = Σ_n |w_n| |f|τ_n/(1 + (fτ_n)²) + T_tail|f| (at most ½Σ|w_n| + T_tail|f|: the bound
+    :meth:`gyro_sim.engine.simulator.Simulator._torque_time` takes at the largest slip). Returns
     c (Σ_k |a_k|) Σ_k Σ_m |P_m(l̂) a_k| max_m₂ g(f): an upper bound of the mean torque now, which falls with the
     slip as a spin-up nears the field's rate and with the transverse field seen as a nutation is damped."""
-    Lm = float(np.linalg.norm(L))
-    if Lm == 0.0 or not om.size:
+    om = np.asarray(om, float)
+    if not om.size:
         return math.inf
-    n = np.asarray(L, float) / Lm
+    has_axis = e_a is not None
+    ea = np.asarray(e_a, float) if has_axis else np.zeros(3)
+    return _torque_scale(np.ascontiguousarray(Bre, float), np.ascontiguousarray(Bim, float), om,
+                         np.asarray(L, float), float(Jt), float(Ja), ea, has_axis, float(c_m),
+                         np.abs(np.asarray(w, float)), np.asarray(tau, float), float(tail))
+
+
+@njit(cache=True)
+def _torque_scale(Bre, Bim, om, L, Jt, Ja, ea, has_axis, c_m, w, tau, tail):
+    """:func:`torque_scale` in compiled code (``w``: |w_n|; ``has_axis`` False: no axis term)."""
+    Lm = math.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
+    if Lm == 0.0:
+        return math.inf
+    n0, n1, n2 = L[0] / Lm, L[1] / Lm, L[2] / Lm
     om_p = Lm / Jt
-    om_r = (1.0 / Ja - 1.0 / Jt) * float(np.dot(L, e_a)) if e_a is not None else 0.0
-    a = np.asarray(Bre, float) - 1j * np.asarray(Bim, float)  # (k, 3)
-    along = (a @ n)[:, None] * n  # P_0(l̂) a
-    perp = a - along
-    cross = np.cross(n, perp)  # [n]× a (the along part has none)
-    amp = {0: np.linalg.norm(along, axis=1), 1: np.linalg.norm(0.5 * (perp - 1j * cross), axis=1),
-           -1: np.linalg.norm(0.5 * (perp + 1j * cross), axis=1)}
-    w, tau = np.abs(np.asarray(w, float)), np.asarray(tau, float)
-
-    def g(f: np.ndarray) -> np.ndarray:
-        f = np.abs(f)[:, None]
-        return np.sum(w * f * tau / (1.0 + (f * tau) ** 2), axis=1) + tail * f[:, 0]
-
+    om_r = (1.0 / Ja - 1.0 / Jt) * (L[0] * ea[0] + L[1] * ea[1] + L[2] * ea[2]) if has_axis else 0.0
     N = 0.0
-    for m in (-1, 0, 1):
-        gm = np.max([g(om - m * om_p - m2 * om_r) for m2 in (-1, 0, 1)], axis=0)
-        N += float(np.sum(amp[m] * gm))
-    return c_m * float(np.sum(np.linalg.norm(a, axis=1))) * N
+    a_sum = 0.0
+    for k in range(om.shape[0]):
+        a0 = complex(Bre[k, 0], -Bim[k, 0])
+        a1 = complex(Bre[k, 1], -Bim[k, 1])
+        a2 = complex(Bre[k, 2], -Bim[k, 2])
+        a_sum += math.sqrt(abs(a0) ** 2 + abs(a1) ** 2 + abs(a2) ** 2)
+        for m in (-1, 0, 1):
+            p0, p1, p2 = _proj(m, n0, n1, n2, a0, a1, a2)
+            amp = math.sqrt(abs(p0) ** 2 + abs(p1) ** 2 + abs(p2) ** 2)
+            gm = 0.0
+            for m2 in (-1, 0, 1):
+                f = abs(om[k] - m * om_p - m2 * om_r)
+                g = tail * f
+                for j in range(w.shape[0]):
+                    ft = f * tau[j]
+                    g += w[j] * ft / (1.0 + ft * ft)
+                gm = max(gm, g)
+            N += amp * gm
+    return c_m * a_sum * N
 
 
 @njit(cache=True, inline="always")

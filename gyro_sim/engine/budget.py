@@ -14,6 +14,7 @@ import math
 from typing import Optional
 
 from gyro_sim.scenes.step_control import STEP_BUDGET, StepBudgetError
+from gyro_sim.scenes.tolerance import DEFAULT_PHASE
 
 __all__ = ["planned_work", "check_budget", "budget_message"]
 
@@ -62,11 +63,12 @@ def budget_message(sim, T: float, period: Optional[float], steps: float, stops: 
             f"({steps:.2g} steps of the stepper, {stops:.2g} output samples and controller ticks), beyond the "
             f"budget of {budget:.3g} (STEP_BUDGET)")
     ways = []
-    if stops <= 0.5 * budget and sim.attitude and (acc.phase_atol is not None or (acc.phase or 1.0) < 1e-9):
+    if stops <= 0.5 * budget and sim.attitude and (acc.phase_atol is not None or (acc.phase or 1.0) < DEFAULT_PHASE):
         # an absolute (or very tight) spin phase: its error grows with the turns
-        if _fits(sim, T, acc.rtol, acc.attitude, stops, budget, phase_atol=None, phase=1e-9) is not None:
+        if _fits(sim, T, acc.rtol, acc.attitude, stops, budget, phase_atol=None, phase=DEFAULT_PHASE) is not None:
             now = (f"phase_atol {acc.phase_atol:g} rad" if acc.phase_atol is not None else f"phase {acc.phase:g}")
-            ways.append(f"hold the spin phase relative to itself: leave out accuracy.phase_atol, accuracy.phase 1e-9 "
+            ways.append(f"hold the spin phase relative to itself: leave out accuracy.phase_atol, accuracy.phase "
+                        f"{DEFAULT_PHASE:g} "
                         f"(now {now})")
     if stops <= 0.5 * budget and not ways:
         att_on = sim.attitude and acc.attitude is not None

@@ -108,6 +108,17 @@ class Runner:
                                                  np.array([T], dtype=float), np.array(sorted(knots), dtype=float),
                                                  self._checks]))
         self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0), self._common]))
+        # the shadow stops only where the dynamics change (a command that changes a stator: apply_commands) and at
+        # the checks and the end: between, its steps are SHADOW_RATIO times the run's, whatever the ticks and
+        # samples that stop the run (a controller that re-sends the same command every tick leaves the shadow
+        # free to step over its ticks: their Richardson difference then measures a run whose steps are as long
+        # as the ticks). With an effect on (its rates change in time, the plan is made afresh at every break) the
+        # shadow follows through every break of every run, as the run does.
+        self._lazy = self.sim.eff[effects.ON] == 0.0
+        if self.shadow is not None:
+            stops = np.unique(np.concatenate([t_out, self.breaks, [0.0]]))
+            # (its step at most SHADOW_RATIO times the run's longest: the run's steps end at its stops)
+            self.shadow.lead_gap = float(np.max(np.diff(stops))) if stops.size > 1 else math.inf
         # output rows held in memory: all of them, or a buffer of ``buffer_rows`` that release() empties (a
         # streamed run: its rows go to a bag as they come, memory stays flat however long the run)
         if buffer_rows is not None and buffer_rows < 2:
@@ -195,9 +206,12 @@ class Runner:
         for name in commands:
             if name not in self.sim.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
-        self.sim.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+        by_index = {self.sim.stator_names.index(n): c for n, c in commands.items()}
+        self.sim.set_stators(by_index)
         if self.shadow is not None:
-            self.shadow.set_stators({self.sim.stator_names.index(n): c for n, c in commands.items()})
+            if self._lazy and _changes(self.shadow, by_index):
+                self.sync_shadow()  # (the shadow reaches the change before it takes it)
+            self.shadow.set_stators(by_index)
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
@@ -234,27 +248,31 @@ class Runner:
 
     # --- accuracy: the shadow run, the checks, the estimate ----------------------------------------
     def _follow(self, tb: float, sel: np.ndarray) -> None:
-        """Advance the shadow to ``tb`` where that is a break of every run (not an output sample made a break:
-        the ROS node's samples are breaks, an in-process run's are not, and the shadow must take the same steps in
-        both); at a check instant compare and maybe change the step."""
+        """At a check instant and at the end: advance the shadow to ``tb`` (:meth:`sync_shadow`), compare and maybe
+        change the step. With an effect on, the shadow follows through every break of every run (not an output
+        sample made a break: the ROS node's samples are breaks, an in-process run's are not, and the shadow must
+        take the same steps in both)."""
         sim, sh = self.sim, self.shadow
-        j = int(np.searchsorted(self._common, tb))
-        if j < self._common.size and self._common[j] == tb or not (np.searchsorted(self.breaks, tb) < self.breaks.size
-                                                                   and self.breaks[np.searchsorted(self.breaks, tb)] == tb):
-            method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
-            s0 = sh.steps
-            sh.advance(tb)
-            self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
-                                     exact=free and sim._free_axis != -1,
-                                     stiff=h > sim.tau_min)
-            self._steps_seen = sim.steps
+        assert sh is not None
+        at_check = self._ck < self._checks.size and tb == self._checks[self._ck]
+        if self._lazy:
+            if not (at_check or tb >= self.T):
+                return
         else:
-            return
-        if self._ck < self._checks.size and tb == self._checks[self._ck]:
+            j = int(np.searchsorted(self._common, tb))
+            i = int(np.searchsorted(self.breaks, tb))
+            if not (j < self._common.size and self._common[j] == tb or not (i < self.breaks.size
+                                                                            and self.breaks[i] == tb)):
+                return
+        self.sync_shadow(tb)
+        seg = sim._seg
+        assert seg is not None
+        method = seg[1][5]
+        if at_check:
             self._ck += 1
             # |N| now and its mean since the previous check; whether the shadow's steps were longer there
             # (from the states at the checks alone: the same in every run, whatever its samples)
-            n_now = float(np.linalg.norm(sim.torque())) if not sim._seg[1][4] else 0.0
+            n_now = float(np.linalg.norm(sim.torque())) if not seg[1][4] else 0.0
             L0, t0, st0, sst0 = self._at_check
             n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
@@ -265,6 +283,21 @@ class Runner:
             if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
                 sim.replan()
                 sh.replan()
+
+    def sync_shadow(self, t: Optional[float] = None) -> None:
+        """Advance the shadow to ``t`` (default: the run's time) and count the stretch's steps, run's and
+        shadow's, for the error control (its Richardson denominator). The shadow's stops are where this is called:
+        at the checks and the end, where a command changes a stator and before an averaged stretch."""
+        sim, sh = self.sim, self.shadow
+        t = sim.t if t is None else t
+        if sh is None or not sh.t < t or sim._seg is None:
+            return
+        method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
+        s0 = sh.steps
+        sh.advance(t)
+        self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
+                                 exact=free and sim._free_axis != -1, stiff=h > sim.tau_min)
+        self._steps_seen = sim.steps
 
     def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate)."""
@@ -305,7 +338,12 @@ class Runner:
         ctl = self.control
         L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
         if self.shadow is not None:
-            sL, sq, sp, how = *ctl.measure(sim, self.shadow)[3:], "richardson"
+            if self.shadow.t == sim.t:
+                sL, sq, sp = ctl.measure(sim, self.shadow)[3:]
+            else:  # (a run stopped between the shadow's stops: its errors as of the last; not caught up, which may
+                # take as long as the run took since, e.g. after a signal)
+                sL, sq, sp = ctl.e_L, ctl.e_q, ctl.e_p
+            how = "richardson"
             # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
             # closer than the step): the plan's model at the knob they ran
             for m, k in ctl.weights.items():
@@ -437,3 +475,7 @@ class Runner:
                          attitude=self.sim.attitude, error_estimate=self.error_estimate())
 
 
+def _changes(sim: Simulator, commands: dict) -> bool:
+    """Whether ``{stator index: (current A | None, rate rad/s | None)}`` changes what a stator of ``sim`` does."""
+    return any(c is not None and c != sim.current[k] or r is not None and r != sim.rate[k]
+               for k, (c, r) in commands.items())

@@ -45,6 +45,8 @@ class Simulator:
         # run follows its ``leader``: the same stepper, steps SHADOW_RATIO times the leader's
         self.step_div = 1.0
         self.leader: Optional["Simulator"] = None
+        #: a shadow's step is at most SHADOW_RATIO times this (s): the leader's longest span between stops
+        self.lead_gap = math.inf
         self.attitude = integrates_attitude(scene, attitude)
         J = scene.inertia
         self.J = J
@@ -586,6 +588,8 @@ class Simulator:
             h_max /= div
             if self.scene.integrator.max_step is not None:
                 h_max = min(h_max, self.scene.integrator.max_step)
+        if lead is not None and math.isfinite(h_max):
+            h_max = min(h_max, SHADOW_RATIO[method] * self.lead_gap)
         self._seg = (key, (self.t, Bre, Bim, om, free, method, h_max))
         return self._seg[1]
 

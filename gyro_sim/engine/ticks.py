@@ -34,7 +34,7 @@ from numba import njit
 from gyro_ctl import law_kernels
 from gyro_ctl.laws import CompiledLaw
 
-from gyro_sim.compiled import frozen_flow, kernels
+from gyro_sim.compiled import frozen_flow, kernels, qs_flow
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.compiled.effects import ON
 from gyro_sim.common.stamps import stamp_ns
@@ -80,8 +80,17 @@ def _free(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
                                   _UNBOUNDED)
 
 
+@njit(cache=True)
+def _qs(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
+    """The quasi-static flow step (:func:`gyro_sim.compiled.qs_flow.integrate_qs`); P = (Bre, Bim, ω, J⁻¹, J_t,
+    J_a, axis, c_m, w, T_tail, eff, case)."""
+    Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, eff, case = P
+    return qs_flow.integrate_qs(y, t0, t_seg, stops, record, h, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, out_y,
+                                out_N, k, eff, case, np.zeros(3), _UNBOUNDED)
+
+
 @njit(inline="always")
-def _step(Pf, Pz, Pa, y, t0, t_seg, stops, record, h, out_y, out_N, k):
+def _step(Pf, Pz, Pa, Pq, y, t0, t_seg, stops, record, h, out_y, out_N, k):
     """The stepper whose argument tuple is given (the others None: numba prunes the calls of the others)."""
     if Pf is not None:
         return _fields(y, t0, t_seg, stops, record, h, out_y, out_N, k, Pf)
@@ -89,6 +98,8 @@ def _step(Pf, Pz, Pa, y, t0, t_seg, stops, record, h, out_y, out_N, k):
         return _frozen(y, t0, t_seg, stops, record, h, out_y, out_N, k, Pz)
     if Pa is not None:
         return _free(y, t0, t_seg, stops, record, h, out_y, out_N, k, Pa)
+    if Pq is not None:
+        return _qs(y, t0, t_seg, stops, record, h, out_y, out_N, k, Pq)
     return k, 0  # (none given: no step)
 
 
@@ -136,7 +147,7 @@ def _stops(bk, s_end, t_out, s, i, e):
 
 
 @njit(cache=True)
-def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, out_N, phase, rate, cur,
+def breaks(Pf, Pz, Pa, Pq, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, out_N, phase, rate, cur,
            ph_rows, cur_rows, rate_rows, law_at, reads_state, t_law, kind, axes, fp, cl, rl, idx, log_c, log_r):
     """Advance y from ``t`` through the breaks ``bk`` (s) under fixed commands, with the numbers
     :meth:`Runner.advance` gives one break at a time: the samples t_out[s0 : s_end[i]] (output row s − ``base``)
@@ -169,7 +180,7 @@ def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, ou
         while bounded and e < nb - 1 and not (law_at[e] and evaluate):
             e += 1
         stops, record = _stops(bk, s_end, t_out, s, i, e)
-        _, st = _step(Pf, Pz, Pa, y, t, t_seg, stops, record, _bound(h_max, bk[e] - t), out_y, out_N, s - base)
+        _, st = _step(Pf, Pz, Pa, Pq, y, t, t_seg, stops, record, _bound(h_max, bk[e] - t), out_y, out_N, s - base)
         steps += st
         for b in range(i, e + 1):
             hi = s_end[b]
@@ -203,23 +214,25 @@ def breaks(Pf, Pz, Pa, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y, ou
 
 
 #: the steppers the compiled loop links (:func:`stepper`); a segment of another (qs_flow) goes break by break
-COMPILED_STEPPERS = frozenset({"lawson8", "etdrk4", "frozen_flow", "free"})
+COMPILED_STEPPERS = frozenset({"lawson8", "etdrk4", "frozen_flow", "free", "qs_flow"})
 
 
 def stepper(sim, seg: tuple) -> tuple:
-    """(Pf, Pz, Pa): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
-    ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow or free, the others None; the
-    argument types are advance's (numba compiles no new signature of the stepper)."""
+    """(Pf, Pz, Pa, Pq): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
+    ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow, free or qs_flow, the others
+    None; the argument types are advance's (numba compiles no new signature of the stepper)."""
     t_seg, Bre, Bim, om, free, method, h_max = seg
     case = None if sim.attitude else True
-    if method == "frozen_flow":
+    if method in ("frozen_flow", "qs_flow"):
         ax = frozen_flow.supported(sim.J)
-        return None, (Bre, Bim, om, sim.Jinv, sim.J[(ax + 1) % 3], sim.J[ax], ax, sim.c_m, sim.w, sim.tail,
-                      1.0 / sim.tau, sim.eff, case), None
+        head = (Bre, Bim, om, sim.Jinv, sim.J[(ax + 1) % 3], sim.J[ax], ax, sim.c_m, sim.w, sim.tail)
+        if method == "qs_flow":
+            return None, None, None, (*head, sim.eff, case)
+        return None, (*head, 1.0 / sim.tau, sim.eff, case), None, None
     if free:
-        return None, None, (sim.Jinv, sim._inv_ref, sim._free_axis, sim.tau)
+        return None, None, (sim.Jinv, sim._inv_ref, sim._free_axis, sim.tau), None
     A, b, c = _tableau(method)  # (made on first use: a tick loop may be a process's first lawson8 run)
-    return (Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.lam, sim.eff, A, b, c, case), None, None
+    return (Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.lam, sim.eff, A, b, c, case), None, None, None
 
 
 class TickLoop:
@@ -276,7 +289,7 @@ class TickLoop:
                 r.sim._tune_call(time.perf_counter() - w0, r.sim.call_steps)
             nb = r._bi - i0
             common = bk[:nb][self._common[i0:i0 + nb]]
-            if r.shadow is not None and common.size:
+            if r.shadow is not None and common.size and not r._lazy:
                 self._follow(common)
         r.wall_time += clock.wall
         r.compile_time += clock.compile

@@ -188,6 +188,45 @@ def attitude_split(q1: np.ndarray, q2: np.ndarray, axis: int, L1=None, L2=None) 
     return dL + np.abs(th1 - th2), np.maximum(twist, dpsi * np.abs(np.sin(th2)))
 
 
+def attitude_split_one(q1, q2, axis: int, L1, L2) -> tuple[float, float]:
+    """:func:`attitude_split` of one pair of states with their kinetic moments (the error control's, at each
+    check: scalar arithmetic, ~50x faster than NumPy on 3-vectors). Returns (direction, phase) in rad."""
+    w1, x1, y1, z1 = (float(v) for v in q1)
+    w2, x2, y2, z2 = (float(v) for v in q2)
+    # relative rotation q1⁻¹ ⊗ q2 (body frame)
+    w = w1 * w2 + x1 * x2 + y1 * y2 + z1 * z2
+    v = (w1 * x2 - w2 * x1 - (y1 * z2 - z1 * y2), w1 * y2 - w2 * y1 - (z1 * x2 - x1 * z2),
+         w1 * z2 - w2 * z1 - (x1 * y2 - y1 * x2))
+    if axis < 0:
+        return 2.0 * math.atan2(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), abs(w)), 0.0
+    twist = 2.0 * math.atan2(v[axis], w)
+    twist = abs((twist + math.pi) % (2.0 * math.pi) - math.pi)
+    a1, a2 = _column(w1, x1, y1, z1, axis), _column(w2, x2, y2, z2, axis)
+    l1, l2 = tuple(float(x) for x in L1), tuple(float(x) for x in L2)
+    th1, th2 = _angle_one(a1, l1), _angle_one(a2, l2)
+    n = max(math.sqrt(l2[0] * l2[0] + l2[1] * l2[1] + l2[2] * l2[2]), 1e-300)
+    e = (l2[0] / n, l2[1] / n, l2[2] / n)
+    d1, d2 = sum(a * b for a, b in zip(a1, e, strict=True)), sum(a * b for a, b in zip(a2, e, strict=True))
+    u1 = tuple(a - d1 * b for a, b in zip(a1, e, strict=True))
+    u2 = tuple(a - d2 * b for a, b in zip(a2, e, strict=True))
+    return _angle_one(l1, l2) + abs(th1 - th2), max(twist, _angle_one(u1, u2) * abs(math.sin(th2)))
+
+
+def _column(w: float, x: float, y: float, z: float, axis: int) -> tuple[float, float, float]:
+    """Column ``axis`` of :func:`quat_to_matrix` of one quaternion: the body axis in the case frame."""
+    if axis == 0:
+        return 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
+    if axis == 1:
+        return 2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)
+    return 2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)
+
+
+def _angle_one(a, b) -> float:
+    """The angle (rad, 0…π) between two 3-vectors (0 where either is zero): :func:`_angle` of one pair."""
+    c = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    return math.atan2(math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+
+
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The angle (rad, 0…π) between vectors a and b (..., 3), row by row (0 where either is zero)."""
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))

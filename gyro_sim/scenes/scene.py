@@ -28,8 +28,8 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       attitude: 1.0e-6               # the directions of the rotor's axes, rad (default 1e-6: the angle between
                                      # the computed and the true symmetry axis; the whole attitude for a body
                                      # with three different moments; null: none, only rtol)
-      phase: 1.0e-9                  # the spin phase about the symmetry axis, relative to the phase turned
-                                     # (default 1e-9; never tighter than attitude; null: none)
+      phase: 1.0e-7                  # the spin phase about the symmetry axis, relative to the phase turned
+                                     # (default 1e-7; never tighter than attitude; null: none)
       phase_atol: null               # rad: an absolute tolerance on the spin phase instead (it costs: the
                                      # phase error grows with the turns)
     modes: null                      # eddy modes kept by the lag model of a solid sphere / shell; default:
@@ -105,6 +105,7 @@ from gyro_ctl.config import ControllerConfig, unknown_stators
 from gyro_ctl.numbers import Finite, NonNegative, Positive, count, real
 
 from gyro_sim.scenes.effect_config import Effects, unit_vector
+from gyro_sim.scenes.tolerance import DEFAULT_ATTITUDE, DEFAULT_PHASE, DEFAULT_RTOL
 from gyro_sim.scenes.scene_text import SceneError, clip, human_bytes, parse_scene_text, preview, read_scene_file
 
 __all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir",
@@ -316,16 +317,16 @@ class Accuracy(_Strict):
       between the computed and the true symmetry axis: nutation and precession); for a body with no symmetry
       axis (three different moments) the whole attitude;
     * ``phase``: the spin phase about the symmetry axis, relative to the phase the rotor turns through over the
-      run (an error of 1e-9 of 1e5 rad is 1e-4 rad); ``phase_atol`` (rad): an absolute tolerance on the spin
+      run (an error of 1e-7 of 1e5 rad is 1e-2 rad); ``phase_atol`` (rad): an absolute tolerance on the spin
       phase instead, on request.
 
-    Defaults 1e-6, 1e-6 rad, 1e-9 (:mod:`gyro_sim.scenes.tolerance`). ``attitude`` and the phase are not results
-    where the attitude is not integrated or was averaged out. The run chooses its eddy modes and step knobs for
-    them and reports its estimated error (``RunResult.error_estimate``; docs/accuracy.md)."""
+    Defaults 1e-6, 1e-6 rad, 1e-7 (:mod:`gyro_sim.scenes.tolerance`, which says why). ``attitude`` and the phase
+    are not results where the attitude is not integrated or was averaged out. The run chooses its eddy modes and
+    step knobs for them and reports its estimated error (``RunResult.error_estimate``; docs/accuracy.md)."""
 
-    rtol: real(ge=1e-13, le=0.1) = 1e-6
-    attitude: Optional[real(ge=1e-13, le=10.0)] = 1e-6  # null: no tolerance on the directions (only rtol)
-    phase: Optional[real(ge=1e-15, le=0.1)] = 1e-9  # relative to the phase turned; null: none
+    rtol: real(ge=1e-13, le=0.1) = DEFAULT_RTOL
+    attitude: Optional[real(ge=1e-13, le=10.0)] = DEFAULT_ATTITUDE  # null: no direction tolerance (only rtol)
+    phase: Optional[real(ge=1e-15, le=0.1)] = DEFAULT_PHASE  # relative to the phase turned; null: none
     phase_atol: Optional[real(ge=1e-13, le=1e6)] = None  # rad, absolute; wins over ``phase``
 
 

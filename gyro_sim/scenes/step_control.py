@@ -8,7 +8,7 @@ from typing import Optional
 
 import numpy as np
 
-from gyro_sim.physics.frames import attitude_split
+from gyro_sim.physics.frames import attitude_split_one
 from gyro_sim.scenes.scene_text import SceneError
 from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, has_symmetry_axis,
                                       is_legacy, phase_tolerance, planning_attitude)
@@ -55,6 +55,11 @@ SPT_MIN = {"lawson8": 8, "etdrk4": 16, "free": 8}
 SPT_MAX = 100000  # the scene format's limit of steps_per_turn
 #: largest rate_change a plan takes (frozen_flow; qs_flow, accurate with longer steps: its error is mostly third order)
 RATE_CHANGE_MAX = 2e-4
+#: largest rate_change the error control takes the frozen-flow step to from what it measures (the plan stays at
+#: RATE_CHANGE_MAX: the plan's error model is a typical scene's, and ``auto`` chooses the stepper by it; at 1e-9
+#: constant_field's frozen-flow errors were 100x the model's at 5e-4). The shadow's steps, SHADOW_RATIO (2) times
+#: longer, stay where the error falls with the step (docs/accuracy.md, "Floors")
+RATE_CHANGE_CONTROL_MAX = 5e-4
 QS_RATE_CHANGE_MAX = 1e-2
 RATE_CHANGE_MIN = 1e-9
 
@@ -227,7 +232,7 @@ ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 1, "free": 8, "qs_flow": 1}
 STIFF_ORDER = 1
 STIFF = "etdrk4 (stiff)"
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
-SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 4.0, "free": 2.0, "qs_flow": 2.0}
+SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 2.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
 #: early ones catch a plan far off, then every 1/16
 CHECKS = tuple(2.0 ** -k for k in range(12, 4, -1)) + tuple(k / 16 for k in range(1, 16))
@@ -400,7 +405,7 @@ class ErrorControl:
 
     def _now(self, main, shadow) -> tuple[float, float, float]:
         """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
-        shadow (:func:`gyro_sim.physics.frames.attitude_split`); ``self.dLn``: the error of |L| (what turns the
+        shadow (:func:`gyro_sim.physics.frames.attitude_split_one`); ``self.dLn``: the error of |L| (what turns the
         spin and precession rates: the phases drift at it over J)."""
         den = self.denom
         if not math.isfinite(den):
@@ -411,7 +416,7 @@ class ErrorControl:
         dL = float(np.linalg.norm(L - Ls)) / den
         dq = dp = 0.0
         if self.attitude:
-            d, p = attitude_split(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
+            d, p = attitude_split_one(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
             dq, dp = float(d) / den, float(p) / den
         return dL, dq, dp
 
@@ -431,9 +436,9 @@ class ErrorControl:
         self.dLn = 0.0
 
     def coarsest(self, main, method: str) -> float:
-        """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_MAX."""
+        """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_CONTROL_MAX."""
         if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
-            return self.plan.rate_change / RATE_CHANGE_MAX
+            return self.plan.rate_change / RATE_CHANGE_CONTROL_MAX
         if method == "qs_flow":
             return SHADOW_RATIO[method] * self.plan.qs_rate_change / QS_RATE_CHANGE_MAX
         div = 1.0
