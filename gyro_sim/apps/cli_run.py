@@ -120,6 +120,10 @@ def _cmd_run(args) -> int:
         return _error(f"--fidelity {args.fidelity}: the ROS simulator node runs the full model; drop --ros or --fidelity")
     try:
         scene = scene_mod.load_scene(args.scene, overrides={"fidelity": args.fidelity} if args.fidelity else None)
+        if args.duration is not None:  # the limits the scene file's own duration met on loading, before any work
+            from gyro_sim.engine.budget import check_run_size
+
+            check_run_size(scene, args.duration, "--duration")
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem

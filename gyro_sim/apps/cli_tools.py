@@ -26,7 +26,11 @@ def _cmd_phase(args) -> int:
         else:
             from gyro_sim.engine import simulate
 
+            from gyro_sim.engine.budget import check_run_size
+
             scene = scene_mod.load_scene(args.source)
+            if args.duration is not None:
+                check_run_size(scene, args.duration, "--duration")
             res = simulate.run(scene, duration=args.duration)
     except scene_mod.SceneError as exc:
         return _error(str(exc))
