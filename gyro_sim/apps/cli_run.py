@@ -177,6 +177,7 @@ def _cmd_run(args) -> int:
         _error(str(exc))
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP
+        _ignore_signals()  # (the rest of a burst of Ctrl-C: the bag is closed; only the summary below may stop)
         progress.close()
         code = exit_status(exc)
         if args.record is None:
@@ -187,7 +188,12 @@ def _cmd_run(args) -> int:
             _write(sys.stderr, f"interrupted ({_signal_name(code)}) before the run started; nothing recorded\n")
             return code
         _write(sys.stderr, f"interrupted ({_signal_name(code)}): the bag holds the run up to the signal\n")
-        _summarise_bag(args.record, png)
+        try:
+            _ignore_signals(False)  # (a summary of a long bag takes a while: Ctrl-C skips it)
+            _summarise_bag(args.record, png)
+            _ignore_signals()
+        except KeyboardInterrupt as again:  # a second Ctrl-C: the bag is closed already; it stops the summary
+            _interrupted(again, f" again: no summary; the bag {args.record} is closed (gyro-sim info {args.record})")
         return code
     finally:
         progress.close()
@@ -220,6 +226,31 @@ def _over_budget(scene, duration):
     except SceneError as exc:
         return str(exc)
     return None
+
+
+def _interrupted(exc: KeyboardInterrupt, what: str = "") -> int:
+    """The one line of a command stopped by a signal that it did not handle itself, and its status (128 + the
+    signal: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP; ``what`` follows it on the line). Later signals are ignored: the command is ending, and a
+    recorded bag was closed by the handler that the first one went through (BagRecorder)."""
+    from gyro_sim.io.signals import exit_status
+
+    _ignore_signals()
+    code = exit_status(exc)
+    _write(sys.stderr, f"interrupted ({_signal_name(code)}){what}\n")
+    return code
+
+
+def _ignore_signals(ignore: bool = True) -> None:
+    """Ignore SIGINT, SIGTERM and SIGHUP from now on (a command ending after a signal: the rest of a burst of
+    Ctrl-C must not kill it while it says so); ``ignore`` False: Ctrl-C raises KeyboardInterrupt again."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        try:
+            signal.signal(sig, signal.SIG_IGN if ignore else
+                          signal.default_int_handler if sig == signal.SIGINT else signal.SIG_IGN)
+        except (ValueError, OSError):  # (not the main thread)
+            pass
 
 
 def _signal_name(status: int) -> str:

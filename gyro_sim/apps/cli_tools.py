@@ -19,7 +19,11 @@ def _cmd_phase(args) -> int:
 
     src = Path(args.source)
     try:
-        if src.is_dir():
+        is_dir = src.is_dir()
+    except (OSError, ValueError):  # a name too long for the file system, a NUL: not a bag; the scene says why
+        is_dir = False
+    try:
+        if is_dir:
             res, _, b, _ = _bag_result(src)
             where = f"{src} (embedded scene)"
             scene = scene_mod.scene_from_dict(scene_mod.parse_scene_text(b.scene_text, where), where=where)
