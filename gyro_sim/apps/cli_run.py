@@ -300,15 +300,15 @@ def _run_ros(args, scene, name) -> int:
     if not Path(bag).exists():  # stopped before the simulator opened its bag
         _write(sys.stderr, f"interrupted: {stopped_by} before the run started; nothing recorded\n")
         return code
-    from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT
+    from gyro_sim.apps.cli_bag import _sample_count, no_samples
     from gyro_sim.io.recording import bag_info
 
     try:
         info = bag_info(bag)
     except Exception as exc:  # (e.g. the node was killed while closing it)
         return _error(f"cannot read the bag {bag}: {exc}")
-    if not info["topics"].get(TOPIC_KINETIC_MOMENT, {}).get("count"):  # stopped before the first sample
-        _write(sys.stderr, f"interrupted: {stopped_by} before the first sample; the bag {bag} holds none\n")
+    if not _sample_count(info):  # stopped before the first sample
+        _write(sys.stderr, f"interrupted ({stopped_by}): {no_samples(bag, info)}\n")
         return code
     status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
     if status != EXIT_OK:

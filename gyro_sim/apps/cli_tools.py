@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from gyro_sim.apps.console import _write
-from gyro_sim.apps.cli_bag import _bag_result
+from gyro_sim.apps.cli_bag import _bag_result, _unreadable
 from gyro_sim.apps.cli_common import (
     EXIT_OK, EXIT_USAGE, _error,
 )
@@ -24,7 +24,10 @@ def _cmd_phase(args) -> int:
         is_dir = False
     try:
         if is_dir:
-            res, _, b, _ = _bag_result(src)
+            try:
+                res, _, b, _ = _bag_result(src)
+            except Exception as exc:  # (a bag without a sample, or one that cannot be read)
+                return _unreadable(src, exc)
             where = f"{src} (embedded scene)"
             scene = scene_mod.scene_from_dict(scene_mod.parse_scene_text(b.scene_text, where), where=where)
         else:
