@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from gyro_sim.apps.console import _write
-from gyro_sim.apps.cli_bag import _summarise_bag
+from gyro_sim.apps.cli_bag import _summarise_bag, _unreadable
 from gyro_sim.apps.cli_common import (
     EXIT_FAILURE, EXIT_OK, EXIT_USAGE, _error, _ros_missing, format_summary,
 )
@@ -240,6 +240,22 @@ def _interrupted(exc: KeyboardInterrupt, what: str = "") -> int:
     return code
 
 
+def _failed_recording(bag: Path, png: Path) -> int:
+    """A ``--ros`` simulator node that ended with status 1, its recording failed (a full disk, a file size limit;
+    its log said why): one ``error:`` line with how its bag ended, then the summary of what fit; status 1, as an
+    in-process run's. A bag that does not read (a node that crashed): the error line of an unreadable bag, 2."""
+    from gyro_sim.io.recording import bag_info
+
+    try:
+        end = bag_info(bag)["end_reason"]
+    except Exception as exc:  # (a node that crashed before closing it)
+        _error(f"the simulator node ended with status {EXIT_FAILURE}")
+        return _unreadable(bag, exc)
+    _error(f"the simulator node could not write the bag {bag} whole: {end}")
+    status = _summarise_bag(bag, png)
+    return EXIT_FAILURE if status == EXIT_OK else status
+
+
 def _ignore_signals(ignore: bool = True) -> None:
     """Ignore SIGINT, SIGTERM and SIGHUP from now on (a command ending after a signal: the rest of a burst of
     Ctrl-C must not kill it while it says so); ``ignore`` False: Ctrl-C raises KeyboardInterrupt again."""
@@ -294,13 +310,15 @@ def _run_ros(args, scene, name) -> int:
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
+    if code == EXIT_FAILURE and Path(bag).exists():  # its recording failed (a full disk): the bag holds what fit
+        return _failed_recording(bag, Path(args.out) / f"{name}.png")
     if stopped_by is None:
         return _error(f"the simulator node ended with status {code}"
                       + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))
     if not Path(bag).exists():  # stopped before the simulator opened its bag
         _write(sys.stderr, f"interrupted: {stopped_by} before the run started; nothing recorded\n")
         return code
-    from gyro_sim.apps.cli_bag import _sample_count, no_samples
+    from gyro_sim.apps.cli_bag import _sample_count
     from gyro_sim.io.recording import bag_info
 
     try:
@@ -308,7 +326,7 @@ def _run_ros(args, scene, name) -> int:
     except Exception as exc:  # (e.g. the node was killed while closing it)
         return _error(f"cannot read the bag {bag}: {exc}")
     if not _sample_count(info):  # stopped before the first sample
-        _write(sys.stderr, f"interrupted ({stopped_by}): {no_samples(bag, info)}\n")
+        _write(sys.stderr, f"interrupted: {stopped_by} before the first sample; the bag {bag} holds none\n")
         return code
     status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
     if status != EXIT_OK:
