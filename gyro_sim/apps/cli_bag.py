@@ -216,8 +216,10 @@ def _cmd_replay(args) -> int:
 
         try:
             rep = rerun_bag(args.bag)
-        except (SceneError, OSError, ValueError) as exc:
+        except SceneError as exc:
             return _error(str(exc))
+        except Exception as exc:  # a bag that cannot be read (damaged, not a bag)
+            return _unreadable(args.bag, exc)
         if not rep["samples_recorded"]:
             from gyro_sim.io.recording import bag_info
 
@@ -256,6 +258,9 @@ def _format_recovery(rep: dict) -> str:
              f"  scene     {rep['scene_name']}" + ("" if rep["scene_found"] else " (no scene found in the bag)")]
     if rep["cut"]:
         lines.append(f"  dropped   the last {rep['dropped_bytes']} of {rep['size']} bytes: {rep['stop']}")
+    elif rep["bad_chunks"]:
+        lines.append(f"  dropped   {len(rep['bad_chunks'])} damaged chunk(s) (below); the rest of the data section is "
+                     f"whole, the {rep['dropped_bytes']} bytes after it (summary, footer) are rebuilt")
     else:
         lines.append(f"  dropped   no message: the data section is whole; the {rep['dropped_bytes']} bytes after it "
                      "(summary, footer) are rebuilt")
