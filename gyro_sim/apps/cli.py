@@ -74,7 +74,8 @@ def _run_epilog() -> str:
     return f"""\
 exit status:
   0    the run reached its end (summary and plot written)
-  1    the bag could not be written whole (e.g. the disk filled): it is closed with what fit
+  1    the bag could not be written whole (e.g. the disk filled; with --ros too): it is closed
+       with what fit
   2    bad usage, a scene error, an unusable --record/--out (checked before the run), or (--ros)
        a node that failed: one 'error:' line
   130  stopped by SIGINT (Ctrl-C)   }} with --record or --ros: the summary and plot of what was

@@ -36,7 +36,10 @@ is kept and the recovery appended.
 **Complete.** A bag is complete (closed) when its directory holds exactly one ``.mcap`` file
 that ends with an MCAP footer and the end magic, and a ``metadata.yaml`` holding
 ``rosbag2_bagfile_information``; anything else with one ``.mcap`` file is *not closed*
-(:func:`not_closed`) and recoverable. A complete bag is refused ("nothing to recover"), and so is
+(:func:`not_closed`) and recoverable. A complete bag is refused ("nothing to recover") unless one of its
+chunks fails its CRC (gyro_sim writes them: :func:`gyro_sim.io.bag_format.write_chunk_crcs`; readers then say to
+recover it, :func:`damaged_message`): it is rebuilt without them, each listed. Refused too are a file that is
+not MCAP at all (no magic at its start: :func:`not_mcap_message`, what the readers say of it) and
 one whose ``.mcap`` file another process holds an exclusive ``flock`` on (a recorder that locks its
 file while recording: recovering under a live writer would race it).
 
@@ -739,7 +742,7 @@ def _bag_and_mcap(path: Path) -> tuple[Path, Path]:
                            "left as it was")
     if _metadata_ok(path) and mcap_closed(files[0]) and not damaged_chunks(files[0]):
         raise RecoverError(f"{path}: nothing to recover: the bag is complete "
-                           f"({files[0].name} is closed, its chunks match their CRCs and metadata.yaml is there)")
+                           f"({files[0].name} is closed and metadata.yaml is there)")
     if _locked(files[0]):
         raise RecoverError(f"{path}: {files[0].name} is locked by a process that is still recording it; "
                            "recover it once that recording has ended (nothing was changed)")
