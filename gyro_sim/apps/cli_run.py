@@ -230,8 +230,8 @@ def _over_budget(scene, duration):
 
 def _interrupted(exc: KeyboardInterrupt, what: str = "") -> int:
     """The one line of a command stopped by a signal that it did not handle itself, and its status (128 + the
-    signal: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP; ``what`` follows it on the line). Later signals are ignored: the command is ending, and a
-    recorded bag was closed by the handler that the first one went through (BagRecorder)."""
+    signal: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP; ``what`` follows it on the line). Later signals are ignored: the
+    command is ending, and a recorded bag was closed by the handler that the first one went through."""
     from gyro_sim.io.signals import exit_status
 
     _ignore_signals()

@@ -198,6 +198,7 @@ def damaged_chunks(mcap: Union[str, os.PathLike]) -> list[str]:
     each as 'the chunk at byte N (M bytes): why'; [] for a sound file. Reads the whole data section (decompressing
     and checksumming each chunk, not parsing its messages); stops at its end or at a record that is cut."""
     from mcap.opcode import Opcode
+    from mcap.records import Chunk
 
     bad: list[str] = []
     with open(mcap, "rb") as f:
@@ -214,7 +215,9 @@ def damaged_chunks(mcap: Union[str, os.PathLike]) -> list[str]:
                 break
             if op == Opcode.CHUNK:
                 try:
-                    _check_chunk(_parse(op, content))
+                    chunk = _parse(op, content)
+                    assert isinstance(chunk, Chunk)
+                    _check_chunk(chunk)
                 except _Malformed as exc:
                     bad.append(f"the chunk at byte {pos} ({len(content)} bytes): {exc}")
             pos += _RECORD_HEAD + len(content)

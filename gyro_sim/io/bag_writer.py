@@ -15,7 +15,9 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence, Uni
 import yaml
 
 from gyro_sim import __version__
-from gyro_sim.io.bag_format import _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, write_chunk_crcs  # noqa: F401
+from gyro_sim.io.bag_format import (  # noqa: F401 (RESERVE_NAME: re-exported)
+    _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, write_chunk_crcs,
+)
 from gyro_sim.io.messages import (
     QOS, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_SCENE,
     TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPIC_TF_STATIC, TOPICS,
