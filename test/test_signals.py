@@ -394,10 +394,12 @@ def test_the_launch_file_gives_the_simulator_time_to_close_its_bag(launch_stubs)
 # --- gyro-sim run --ros: what it says for each status of the simulator (launch() replaced) -------------------
 
 @needs_ros  # (gyro-sim run --ros refuses to start without rclpy)
-@pytest.mark.parametrize("case", ["no_bag", "no_samples", "killed", "refused"])
+@pytest.mark.parametrize("case", ["no_bag", "no_samples", "killed", "refused", "disk_full"])
 def test_the_cli_reports_each_end_of_the_simulator(monkeypatch, tmp_path, capsys, case):
     """Interrupted before the bag was opened or before the first sample: 130 and one line (no error, no traceback);
-    a simulator that had to be killed or refused its scene: an ``error:`` line with its status, exit 2."""
+    a simulator that had to be killed or refused its scene: an ``error:`` line with its status, exit 2; a simulator
+    whose disk filled (status 1, its bag closed with what fit): an ``error:`` line, the summary of the bag and 1, as
+    the README's table says (issue 29: it was 2)."""
     from gyro_sim import cli
     from gyro_sim.recording import BagRecorder
     from gyro_sim.ros import launch as launch_mod
@@ -410,11 +412,21 @@ def test_the_cli_reports_each_end_of_the_simulator(monkeypatch, tmp_path, capsys
             rec = BagRecorder(bag, "scene: text\n", "spinup_thin_shell")
             rec.interrupted("signal SIGINT")
             rec.close()
-        return {"no_bag": 130, "no_samples": 130, "killed": -9, "refused": 2}[case]
+        if case == "disk_full":  # (what the node's recorder leaves: the samples before the disk filled)
+            from gyro_sim.engine.simulate import run
+            from gyro_sim.recording import record_result
+            from gyro_sim.scene import load_scene
+
+            record_result(run(load_scene("spinup_thin_shell"), duration=0.1), bag)
+        return {"no_bag": 130, "no_samples": 130, "killed": -9, "refused": 2, "disk_full": 1}[case]
 
     monkeypatch.setattr(launch_mod, "launch", fake_launch)
     code = cli.main(["run", "spinup_thin_shell", "--ros", "--record", str(bag), "--out", str(tmp_path / "out")])
     out, err = capsys.readouterr()
+    if case == "disk_full":
+        assert code == 1 and err == f"error: the simulator node could not write the bag {bag} whole: complete\n"
+        assert "final spin rate" in out and f"bag               {bag}" in out
+        return
     assert out == ""
     if case == "no_bag":
         assert (code, err) == (130, "interrupted: SIGINT before the run started; nothing recorded\n")

@@ -49,7 +49,7 @@ from gyro_sim.apps.cli_common import (  # noqa: F401
     EXIT_BROKEN_PIPE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, _error, _num, _ros_missing, format_summary,
 )
 from gyro_sim.apps.cli_run import (  # noqa: F401
-    _cmd_run, _live_usage, _Progress, _run_ros, _signal_name, _start_live, _unwritable_out,
+    _cmd_run, _interrupted, _live_usage, _Progress, _run_ros, _signal_name, _start_live, _unwritable_out,
 )
 from gyro_sim.apps.cli_tools import (  # noqa: F401
     _cmd_api_docs, _cmd_flywheel_plan, _cmd_phase, _cmd_ros_index, _cmd_scenes, _cmd_warmup,
@@ -74,7 +74,8 @@ def _run_epilog() -> str:
     return f"""\
 exit status:
   0    the run reached its end (summary and plot written)
-  1    the bag could not be written whole (e.g. the disk filled): it is closed with what fit
+  1    the bag could not be written whole (e.g. the disk filled; with --ros too): it is closed
+       with what fit
   2    bad usage, a scene error, an unusable --record/--out (checked before the run), or (--ros)
        a node that failed: one 'error:' line
   130  stopped by SIGINT (Ctrl-C)   }} with --record or --ros: the summary and plot of what was
@@ -278,6 +279,14 @@ def main(argv=None) -> int:
             status = _main(argv)
         except MissingExtra as exc:
             status = _error(str(exc))
+        except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM / SIGHUP where no command handled it (e.g. while
+            status = _interrupted(exc)    # starting, or a second one while a stopped run is summarised)
+        except OSError as exc:  # a file system error on a path that the checks before the work did not foresee
+            if isinstance(exc, BrokenPipeError) or exc.filename is None:
+                raise
+            from gyro_sim.common.paths import shown
+
+            status = _error(f"{shown(exc.filename)}: {exc.strerror or exc}")
         except SystemExit:  # argparse's --help, --version or usage error: its output is flushed here too
             sys.stdout.flush()
             raise
@@ -314,8 +323,32 @@ def _main(argv) -> int:
         return sweep_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
+    bad = _unusable_path_arg(parser, args)
+    if bad:
+        return _error(bad)
     _one_line_accuracy_warnings()
     return args.func(args)
+
+
+def _unusable_path_arg(parser: argparse.ArgumentParser, args) -> "str | None":
+    """The one line refusing a path argument of the chosen command (``--record``, ``--out``, ``BAG``, ...) that no
+    file system call could take (a name longer than the file system allows, a NUL: gyro_sim.common.paths), or
+    None; checked before any work."""
+    from gyro_sim.common.paths import path_problem
+
+    actions = list(parser._actions)
+    for name in (getattr(args, "command", None), getattr(args, "bag_command", None)):
+        sub = next((a for a in actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None or name not in sub.choices:
+            break
+        actions = list(sub.choices[name]._actions)
+    for a in actions:
+        value = getattr(args, a.dest, None)
+        if a.type is Path and isinstance(value, Path):
+            why = path_problem(value)
+            if why:
+                return f"{a.option_strings[0] if a.option_strings else a.metavar or a.dest} {why}"
+    return None
 
 
 def _one_line_accuracy_warnings() -> None:

@@ -26,6 +26,25 @@ def _bag_scene(b):
         return None
 
 
+class NoSamples(ValueError):
+    """A bag that holds no state sample (its recording was stopped before the first one): valid, but with nothing
+    to summarise or plot; the message says so in one line."""
+
+
+def no_samples(bag, info: dict) -> str:
+    """The one line describing a bag without a state sample, from its :func:`~gyro_sim.io.recording.bag_info`."""
+    return (f"the bag {bag} holds no state sample: its recording was stopped before the first one "
+            f"(end: {info.get('end_reason') or 'not recorded'})")
+
+
+def _sample_count(info: dict):
+    """The state samples of a bag from its :func:`~gyro_sim.io.recording.bag_info`, None if it has no such topic."""
+    from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT
+
+    topic = info["topics"].get(TOPIC_KINETIC_MOMENT)
+    return None if topic is None else int(topic.get("count") or 0)
+
+
 def _bag_result(bag: Path):
     """A RunResult-like view of a recorded bag (for the summary and the plot)."""
     from types import SimpleNamespace
@@ -36,6 +55,8 @@ def _bag_result(bag: Path):
 
     b = read_bag(bag, max_samples=PLOT_SAMPLES)  # (thinned: memory bounded however long the run)
     info = bag_info(bag)
+    if not len(b.t):
+        raise NoSamples(no_samples(bag, info))
     J = None
     try:
         from gyro_sim.scenes.scene_text import parse_scene_text
@@ -68,6 +89,8 @@ def _unreadable(bag: Path, exc: Exception) -> int:
     such, with the command that recovers it."""
     from gyro_sim.io.bag_repair import not_closed_message
 
+    if isinstance(exc, NoSamples):  # (valid, but nothing to show)
+        return _error(f"{exc}: nothing to plot")
     return _error(not_closed_message(bag) or f"cannot read the bag {bag}: {exc}")
 
 
@@ -76,6 +99,9 @@ def _summarise_bag(bag: Path, png: Path) -> int:
 
     try:
         res, summary, b, info = _bag_result(bag)
+    except NoSamples as exc:  # (a run stopped before its first sample: said, not an error)
+        _write(sys.stderr, f"{exc}\n")
+        return EXIT_OK
     except Exception as exc:  # a bag that cannot be read
         return _unreadable(bag, exc)
     plotting.plot_run(res, png)
@@ -127,6 +153,8 @@ def _info_rows(info: dict) -> list:
             ("storage", f"{info['storage']} (bag format version {info['bag_version']})"),
             ("scene", str(info["scene_name"])), ("gyro_sim version", str(info["version"])),
             ("duration", span), ("messages", str(info["message_count"])), ("end", str(info["end_reason"]))]
+    if _sample_count(info) == 0:
+        rows.append(("samples", "none: the recording was stopped before the first state sample"))
     if "mode" in custom:
         rows.append(("mode", str(custom["mode"])))
     if custom.get("wall_time"):
@@ -138,7 +166,7 @@ def _info_rows(info: dict) -> list:
         rows.append(("steps", str(custom["steps"])))
     if "control_period" in custom:
         rows.append(("control period", _seconds(custom["control_period"])))
-    if custom.get("error_estimate"):
+    if custom.get("error_estimate") and _sample_count(info) != 0:  # (no sample: no run to estimate)
         rows.append(_error_row(custom["error_estimate"]))
     shown = {"scene_name", "version", "end", "scene", "duration", "planned_duration", "mode", "wall_time",
              "compile_time", "steps", "control_period", "error_estimate"}
@@ -190,8 +218,15 @@ def _cmd_replay(args) -> int:
 
         try:
             rep = rerun_bag(args.bag)
-        except (SceneError, OSError, ValueError) as exc:
+        except SceneError as exc:
             return _error(str(exc))
+        except Exception as exc:  # a bag that cannot be read (damaged, not a bag)
+            return _unreadable(args.bag, exc)
+        if not rep["samples_recorded"]:
+            from gyro_sim.io.recording import bag_info
+
+            _write(sys.stdout, f"{no_samples(args.bag, bag_info(args.bag))}: nothing to re-run\n")
+            return EXIT_OK
         d = rep["max_abs_diff"]
         _write(sys.stdout, f"re-ran {rep['samples_rerun']} samples (bag: {rep['samples_recorded']}); largest |Δ|: "
                            + ", ".join(f"{k} {v:.3g}" for k, v in d.items())
@@ -225,6 +260,9 @@ def _format_recovery(rep: dict) -> str:
              f"  scene     {rep['scene_name']}" + ("" if rep["scene_found"] else " (no scene found in the bag)")]
     if rep["cut"]:
         lines.append(f"  dropped   the last {rep['dropped_bytes']} of {rep['size']} bytes: {rep['stop']}")
+    elif rep["bad_chunks"]:
+        lines.append(f"  dropped   {len(rep['bad_chunks'])} damaged chunk(s) (below); the rest of the data section is "
+                     f"whole, the {rep['dropped_bytes']} bytes after it (summary, footer) are rebuilt")
     else:
         lines.append(f"  dropped   no message: the data section is whole; the {rep['dropped_bytes']} bytes after it "
                      "(summary, footer) are rebuilt")

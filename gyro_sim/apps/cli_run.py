@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from gyro_sim.apps.console import _write
-from gyro_sim.apps.cli_bag import _summarise_bag
+from gyro_sim.apps.cli_bag import _summarise_bag, _unreadable
 from gyro_sim.apps.cli_common import (
     EXIT_FAILURE, EXIT_OK, EXIT_USAGE, _error, _ros_missing, format_summary,
 )
@@ -120,6 +120,10 @@ def _cmd_run(args) -> int:
         return _error(f"--fidelity {args.fidelity}: the ROS simulator node runs the full model; drop --ros or --fidelity")
     try:
         scene = scene_mod.load_scene(args.scene, overrides={"fidelity": args.fidelity} if args.fidelity else None)
+        if args.duration is not None:  # the limits the scene file's own duration met on loading, before any work
+            from gyro_sim.engine.budget import check_run_size
+
+            check_run_size(scene, args.duration, "--duration")
     except scene_mod.SceneError as exc:
         return _error(str(exc))
     name = getattr(scene, "name", None) or Path(str(args.scene)).stem
@@ -173,6 +177,7 @@ def _cmd_run(args) -> int:
         _error(str(exc))
         return EXIT_FAILURE
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP
+        _ignore_signals()  # (the rest of a burst of Ctrl-C: the bag is closed; only the summary below may stop)
         progress.close()
         code = exit_status(exc)
         if args.record is None:
@@ -183,7 +188,12 @@ def _cmd_run(args) -> int:
             _write(sys.stderr, f"interrupted ({_signal_name(code)}) before the run started; nothing recorded\n")
             return code
         _write(sys.stderr, f"interrupted ({_signal_name(code)}): the bag holds the run up to the signal\n")
-        _summarise_bag(args.record, png)
+        try:
+            _ignore_signals(False)  # (a summary of a long bag takes a while: Ctrl-C skips it)
+            _summarise_bag(args.record, png)
+            _ignore_signals()
+        except KeyboardInterrupt as again:  # a second Ctrl-C: the bag is closed already; it stops the summary
+            _interrupted(again, f" again: no summary; the bag {args.record} is closed (gyro-sim info {args.record})")
         return code
     finally:
         progress.close()
@@ -216,6 +226,47 @@ def _over_budget(scene, duration):
     except SceneError as exc:
         return str(exc)
     return None
+
+
+def _interrupted(exc: KeyboardInterrupt, what: str = "") -> int:
+    """The one line of a command stopped by a signal that it did not handle itself, and its status (128 + the
+    signal: 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP; ``what`` follows it on the line). Later signals are ignored: the
+    command is ending, and a recorded bag was closed by the handler that the first one went through."""
+    from gyro_sim.io.signals import exit_status
+
+    _ignore_signals()
+    code = exit_status(exc)
+    _write(sys.stderr, f"interrupted ({_signal_name(code)}){what}\n")
+    return code
+
+
+def _failed_recording(bag: Path, png: Path) -> int:
+    """A ``--ros`` simulator node that ended with status 1, its recording failed (a full disk, a file size limit;
+    its log said why): one ``error:`` line with how its bag ended, then the summary of what fit; status 1, as an
+    in-process run's. A bag that does not read (a node that crashed): the error line of an unreadable bag, 2."""
+    from gyro_sim.io.recording import bag_info
+
+    try:
+        end = bag_info(bag)["end_reason"]
+    except Exception as exc:  # (a node that crashed before closing it)
+        _error(f"the simulator node ended with status {EXIT_FAILURE}")
+        return _unreadable(bag, exc)
+    _error(f"the simulator node could not write the bag {bag} whole: {end}")
+    status = _summarise_bag(bag, png)
+    return EXIT_FAILURE if status == EXIT_OK else status
+
+
+def _ignore_signals(ignore: bool = True) -> None:
+    """Ignore SIGINT, SIGTERM and SIGHUP from now on (a command ending after a signal: the rest of a burst of
+    Ctrl-C must not kill it while it says so); ``ignore`` False: Ctrl-C raises KeyboardInterrupt again."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        try:
+            signal.signal(sig, signal.SIG_IGN if ignore else
+                          signal.default_int_handler if sig == signal.SIGINT else signal.SIG_IGN)
+        except (ValueError, OSError):  # (not the main thread)
+            pass
 
 
 def _signal_name(status: int) -> str:
@@ -259,20 +310,22 @@ def _run_ros(args, scene, name) -> int:
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
+    if code == EXIT_FAILURE and Path(bag).exists():  # its recording failed (a full disk): the bag holds what fit
+        return _failed_recording(bag, Path(args.out) / f"{name}.png")
     if stopped_by is None:
         return _error(f"the simulator node ended with status {code}"
                       + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))
     if not Path(bag).exists():  # stopped before the simulator opened its bag
         _write(sys.stderr, f"interrupted: {stopped_by} before the run started; nothing recorded\n")
         return code
-    from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT
+    from gyro_sim.apps.cli_bag import _sample_count
     from gyro_sim.io.recording import bag_info
 
     try:
         info = bag_info(bag)
     except Exception as exc:  # (e.g. the node was killed while closing it)
         return _error(f"cannot read the bag {bag}: {exc}")
-    if not info["topics"].get(TOPIC_KINETIC_MOMENT, {}).get("count"):  # stopped before the first sample
+    if not _sample_count(info):  # stopped before the first sample
         _write(sys.stderr, f"interrupted: {stopped_by} before the first sample; the bag {bag} holds none\n")
         return code
     status = _summarise_bag(bag, Path(args.out) / f"{name}.png")

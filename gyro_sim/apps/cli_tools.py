@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from gyro_sim.apps.console import _write
-from gyro_sim.apps.cli_bag import _bag_result
+from gyro_sim.apps.cli_bag import _bag_result, _unreadable
 from gyro_sim.apps.cli_common import (
     EXIT_OK, EXIT_USAGE, _error,
 )
@@ -19,14 +19,25 @@ def _cmd_phase(args) -> int:
 
     src = Path(args.source)
     try:
-        if src.is_dir():
-            res, _, b, _ = _bag_result(src)
+        is_dir = src.is_dir()
+    except (OSError, ValueError):  # a name too long for the file system, a NUL: not a bag; the scene says why
+        is_dir = False
+    try:
+        if is_dir:
+            try:
+                res, _, b, _ = _bag_result(src)
+            except Exception as exc:  # (a bag without a sample, or one that cannot be read)
+                return _unreadable(src, exc)
             where = f"{src} (embedded scene)"
             scene = scene_mod.scene_from_dict(scene_mod.parse_scene_text(b.scene_text, where), where=where)
         else:
             from gyro_sim.engine import simulate
 
+            from gyro_sim.engine.budget import check_run_size
+
             scene = scene_mod.load_scene(args.source)
+            if args.duration is not None:
+                check_run_size(scene, args.duration, "--duration")
             res = simulate.run(scene, duration=args.duration)
     except scene_mod.SceneError as exc:
         return _error(str(exc))

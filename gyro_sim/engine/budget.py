@@ -7,16 +7,22 @@ The work a plan predicts (:func:`planned_work`) is the steps of :meth:`Simulator
 duration plus its output samples and controller ticks (each is a stop of the stepper, and at least one step): it
 is counted before anything is allocated, so a duration of 1e15 s is refused at once, not after minutes of building
 its output grid.
+
+A run of another duration than its scene's (``gyro-sim run --duration``, ``run(scene, duration=...)``) is held to
+the scene's own limits first (:func:`check_run_size`: the output windows' samples and the memory of the result,
+:func:`gyro_sim.scenes.scene.check_result_size`), before its step plan is made: a duration of 1e308 s is refused
+there, in one line, not in the plan's arithmetic.
 """
 from __future__ import annotations
 
 import math
 from typing import Optional
 
+from gyro_sim.scenes.scene import SceneError, check_result_size
 from gyro_sim.scenes.step_control import STEP_BUDGET, StepBudgetError
 from gyro_sim.scenes.tolerance import DEFAULT_PHASE
 
-__all__ = ["planned_work", "check_budget", "budget_message"]
+__all__ = ["planned_work", "check_budget", "budget_message", "check_run_size"]
 
 #: the looser tolerances the message tries, tightest first (it names the first that fits the budget)
 _RTOLS = (1e-5, 1e-4, 1e-3, 1e-2, 1e-1)
@@ -96,3 +102,21 @@ def budget_message(sim, T: float, period: Optional[float], steps: float, stops: 
     # (the steps grow at least in proportion to the duration)
     ways.append(f"shorten the duration (about {T * budget / (steps + stops):.2g} s fits)")
     return f"{head}: {', or '.join(ways)}; --force (Python: force=True) runs it anyway"
+
+
+def check_run_size(scene, T: float, name: str = "duration") -> None:
+    """Raise :class:`~gyro_sim.scenes.scene.SceneError` (one line naming ``name``, e.g. ``--duration``, its value
+    and what to lower) where a run of ``scene`` to ``T`` s is refused by the limits a scene file of that duration
+    meets on loading: a finite duration > 0, at most ``MAX_WINDOW_SAMPLES`` samples a window and at most
+    :func:`~gyro_sim.scenes.scene.max_result_bytes` of result in memory. Nothing is planned or allocated."""
+    try:
+        T = float(T)
+    except (TypeError, ValueError):
+        T = math.nan
+    if not (math.isfinite(T) and T > 0):
+        raise SceneError(f"{name} = {T}: must be a finite number of seconds > 0")
+    try:
+        scene.output.check_windows(T)
+        check_result_size(scene, T, name)
+    except ValueError as exc:
+        raise SceneError(f"scene {scene.name!r}: {exc}") from None

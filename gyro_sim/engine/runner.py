@@ -10,7 +10,7 @@ import numpy as np
 
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
-from gyro_sim.engine.budget import check_budget
+from gyro_sim.engine.budget import check_budget, check_run_size
 from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.simulator import Simulator
@@ -53,8 +53,8 @@ class Runner:
                  buffer_rows: Optional[int] = None, horizon: Optional[float] = None,
                  estimate: Optional[bool] = None, force: bool = False):
         T = scene.duration if duration is None else float(duration)
-        if not (math.isfinite(T) and T > 0):
-            raise SceneError(f"duration = {duration}: must be a finite number of seconds > 0")
+        if T != scene.duration:  # (the scene's own was checked on loading)
+            check_run_size(scene, T)  # the samples and the memory, before the plan's arithmetic meets T
         if control_period is not None and not (math.isfinite(control_period) and control_period > 0):
             raise SceneError(f"control_period = {control_period}: must be a finite number of seconds > 0")
         self.scene, self.T = scene, T

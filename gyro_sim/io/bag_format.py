@@ -17,6 +17,40 @@ CUSTOM_KEYS = {
 #: in the summary (readers of a closed bag see only the ``rosbag2`` record and metadata.yaml).
 EARLY_METADATA = "gyro_sim.custom_data"
 
+#: the space reserve a recorder kept in its bag folder before issue 29 (a kill -9 left it there, 4 MiB); today's
+#: reserve has no name (gyro_sim.io.bag_writer), and `gyro-sim bag recover` removes an old one
+RESERVE_NAME = ".gyro_sim_reserve"
+
+#: where a Chunk record keeps the CRC32 of its uncompressed records: after its opcode (1 byte), its length (8) and
+#: its message start time, end time and uncompressed size (8 each)
+_CHUNK_CRC_AT = 1 + 8 + 3 * 8
+
+
+def write_chunk_crcs(storage) -> None:
+    """Make rosbags' MCAP storage writer (``Writer(...).storage`` once opened) write each chunk's CRC.
+
+    rosbags writes 0 there, which MCAP readers take as "no CRC": a flipped byte inside a chunk went unnoticed by
+    every reader and by ``gyro-sim bag recover``. Each chunk's CRC32 (of its uncompressed records, as the MCAP
+    specification says) is computed before the chunk is written and put in its place after: rosbags' reader, the
+    ``mcap`` reader and bag_repair check it."""
+    import struct
+    import zlib
+
+    close_chunk = storage.close_chunk
+
+    def close_with_crc() -> None:
+        with storage.chunk.bio.getbuffer() as records:
+            crc = zlib.crc32(records)
+        start = storage.bio.tell()
+        close_chunk()
+        end = storage.bio.tell()
+        storage.bio.seek(start + _CHUNK_CRC_AT)
+        storage.bio.write(struct.pack("<I", crc))
+        storage.bio.seek(end)
+
+    storage.close_chunk = close_with_crc
+
+
 _TYPESTORE = None
 
 

@@ -17,7 +17,7 @@ from gyro_sim.io.messages import (
     TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS,
 )
 
-__all__ = ["BagData", "read_bag", "bag_info", "BagNotClosedError"]
+__all__ = ["BagData", "read_bag", "bag_info", "BagNotClosedError", "BagDamagedError"]
 
 
 @dataclass
@@ -88,6 +88,19 @@ def _refuse_not_closed(path: Path) -> None:
         raise BagNotClosedError(why)
 
 
+class BagDamagedError(ValueError):
+    """A closed bag with chunks that do not match their CRCs: the message says which and to run `gyro-sim bag
+    recover` (which keeps the sound chunks)."""
+
+
+def _refuse_damaged(path: Path) -> None:
+    from gyro_sim.io.bag_repair import damaged_message
+
+    why = damaged_message(path)
+    if why:
+        raise BagDamagedError(why)
+
+
 def _ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
@@ -102,11 +115,23 @@ def read_bag(path: Union[str, os.PathLike], max_samples: Optional[int] = None) -
 
     ``max_samples``: read at most about that many samples of each state topic (and of the commands and /clock):
     every k-th message and the last one, k from the bag's message counts (memory bounded however long the run: a
-    summary or a plot of an hour-long bag); None reads every message."""
-    from rosbags.rosbag2 import Reader
+    summary or a plot of an hour-long bag); None reads every message. A bag that was not closed, or whose chunks
+    do not match their CRCs: :class:`BagNotClosedError` / :class:`BagDamagedError`, saying to run
+    ``gyro-sim bag recover``."""
+    from rosbags.rosbag2 import ReaderError
 
     path = Path(path)
     _refuse_not_closed(path)
+    try:
+        return _read_bag(path, max_samples)
+    except ReaderError:  # (rosbags checks each chunk's CRC as it reads it)
+        _refuse_damaged(path)
+        raise
+
+
+def _read_bag(path: Path, max_samples: Optional[int]) -> BagData:
+    from rosbags.rosbag2 import Reader
+
     ts = _typestore()
     des = ts.deserialize_cdr
     acc: dict[str, tuple[list, list]] = {t: ([], []) for t in (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER,
@@ -223,11 +248,13 @@ def read_bag(path: Union[str, os.PathLike], max_samples: Optional[int] = None) -
 
 
 def bag_info(path: Union[str, os.PathLike]) -> dict:
-    """Summary of a bag without reading its messages: topics (type, count), times (s), scene, version."""
+    """Summary of a bag without reading its messages: topics (type, count), times (s), scene, version. Its chunks
+    are checked against their CRCs (:class:`BagDamagedError`)."""
     from rosbags.rosbag2 import Reader
 
     path = Path(path)
     _refuse_not_closed(path)
+    _refuse_damaged(path)  # (reads the file once: a flipped byte in a chunk is found here, not by a later reader)
     bag_version, storage = None, path.suffix.lstrip(".")
     if path.is_dir() and (path / "metadata.yaml").is_file():
         info = (yaml.safe_load((path / "metadata.yaml").read_text()) or {}).get("rosbag2_bagfile_information") or {}

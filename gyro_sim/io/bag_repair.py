@@ -36,7 +36,10 @@ is kept and the recovery appended.
 **Complete.** A bag is complete (closed) when its directory holds exactly one ``.mcap`` file
 that ends with an MCAP footer and the end magic, and a ``metadata.yaml`` holding
 ``rosbag2_bagfile_information``; anything else with one ``.mcap`` file is *not closed*
-(:func:`not_closed`) and recoverable. A complete bag is refused ("nothing to recover"), and so is
+(:func:`not_closed`) and recoverable. A complete bag is refused ("nothing to recover") unless one of its
+chunks fails its CRC (gyro_sim writes them: :func:`gyro_sim.io.bag_format.write_chunk_crcs`; readers then say to
+recover it, :func:`damaged_message`): it is rebuilt without them, each listed. Refused too are a file that is
+not MCAP at all (no magic at its start: :func:`not_mcap_message`, what the readers say of it) and
 one whose ``.mcap`` file another process holds an exclusive ``flock`` on (a recorder that locks its
 file while recording: recovering under a live writer would race it).
 
@@ -66,12 +69,13 @@ from typing import TYPE_CHECKING, Any, BinaryIO, Callable, Iterator, Optional, U
 import yaml
 
 from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT, TOPIC_SCENE
-from gyro_sim.io.bag_format import BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA
+from gyro_sim.io.bag_format import BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, write_chunk_crcs
 
 if TYPE_CHECKING:  # pragma: no cover
     from mcap.records import Chunk, McapRecord
 
-__all__ = ["recover_bag", "RecoverError", "not_closed", "not_closed_message", "mcap_closed", "NOT_CLOSED"]
+__all__ = ["recover_bag", "RecoverError", "not_closed", "not_closed_message", "mcap_closed", "NOT_CLOSED",
+           "damaged_chunks", "damaged_message", "not_mcap_message"]
 
 #: the one line readers print for a bag that was not closed (``{bag}``: the path as given)
 NOT_CLOSED = ("{bag} was not closed (the recording was cut: kill -9, crash or power loss); "
@@ -164,7 +168,74 @@ def not_closed_message(path: Union[str, os.PathLike]) -> Optional[str]:
     bag = not_closed(path)
     if bag is None:
         return None
-    return NOT_CLOSED.format(bag=path if Path(path).is_dir() else bag)
+    return not_mcap_message(path) or NOT_CLOSED.format(bag=path if Path(path).is_dir() else bag)
+
+
+def _starts_as_mcap(mcap: Path) -> bool:
+    """True unless the file's first bytes are not the MCAP magic (an empty file, or one cut inside the magic, is a
+    recording cut at its start: True)."""
+    try:
+        with open(mcap, "rb") as f:
+            head = f.read(len(MAGIC))
+    except OSError:
+        return True
+    return MAGIC.startswith(head)
+
+
+def not_mcap_message(path: Union[str, os.PathLike]) -> Optional[str]:
+    """The one line for a bag directory (or its ``NAME/NAME.mcap``) whose one .mcap file is not an MCAP file at all
+    (no MCAP magic at its start: random bytes, another format), or None."""
+    bag = _bag_dir_of(Path(path))
+    files = _mcap_files(bag) if bag is not None else []
+    if len(files) != 1 or _starts_as_mcap(files[0]):
+        return None
+    return (f"{path}: {files[0].name} is not an MCAP file (no MCAP magic at its start): not a bag; gyro-sim bag "
+            "recover cannot rebuild it either")
+
+
+def damaged_chunks(mcap: Union[str, os.PathLike]) -> list[str]:
+    """The chunks of an MCAP file's data section whose records do not match their CRC (or do not decompress),
+    each as 'the chunk at byte N (M bytes): why'; [] for a sound file. Reads the whole data section (decompressing
+    and checksumming each chunk, not parsing its messages); stops at its end or at a record that is cut."""
+    from mcap.opcode import Opcode
+    from mcap.records import Chunk
+
+    bad: list[str] = []
+    with open(mcap, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if f.read(len(MAGIC)) != MAGIC:
+            return bad
+        pos = len(MAGIC)
+        while pos < size:
+            try:
+                op, content = _read_frame(f, pos, size)
+            except (_Cut, _Malformed):
+                break
+            if op in (Opcode.DATA_END, Opcode.FOOTER):
+                break
+            if op == Opcode.CHUNK:
+                try:
+                    chunk = _parse(op, content)
+                    assert isinstance(chunk, Chunk)
+                    _check_chunk(chunk)
+                except _Malformed as exc:
+                    bad.append(f"the chunk at byte {pos} ({len(content)} bytes): {exc}")
+            pos += _RECORD_HEAD + len(content)
+    return bad
+
+
+def damaged_message(path: Union[str, os.PathLike]) -> Optional[str]:
+    """The one line for a closed bag (directory or ``NAME/NAME.mcap``) with damaged chunks (:func:`damaged_chunks`),
+    saying what to run, or None."""
+    bag = _bag_dir_of(Path(path))
+    files = _mcap_files(bag) if bag is not None else []
+    if len(files) != 1:
+        return None
+    bad = damaged_chunks(files[0])
+    if not bad:
+        return None
+    return (f"{len(bad)} damaged chunk(s) in {files[0].name} ({bad[0]}{'; ...' if len(bad) > 1 else ''}); "
+            f"run: gyro-sim bag recover {path} (it keeps every sound chunk and says which it dropped)")
 
 
 # --- reading the damaged file ----------------------------------------------------------------------
@@ -247,11 +318,9 @@ def _define(rec: "McapRecord", schemas: dict, channels: dict) -> None:
     table[rec.id] = rec
 
 
-def _chunk_records(chunk: "Chunk", scan: _Scan) -> list:
-    """The schema, channel and message records of a chunk, checked (see the module docstring);
-    _Malformed if the chunk fails a check. Its definitions enter ``scan`` only if it passes."""
-    from mcap.opcode import Opcode
-    from mcap.records import Message
+def _check_chunk(chunk: "Chunk") -> bytes:
+    """A chunk's records, decompressed and checked against its CRC (where it has one) and its declared size;
+    _Malformed if it fails."""
     from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 
     try:
@@ -261,8 +330,19 @@ def _chunk_records(chunk: "Chunk", scan: _Scan) -> list:
         raise _Malformed(f"its CRC does not match ({exc})") from None
     except Exception as exc:  # unknown compression, a damaged compressed stream
         raise _Malformed(f"cannot decompress it ({chunk.compression or 'none'}): {exc}") from None
-    if n != chunk.uncompressed_size:
-        raise _Malformed(f"{n} bytes, {chunk.uncompressed_size} declared")
+    if n != chunk.uncompressed_size or len(raw) != n:
+        raise _Malformed(f"{len(raw)} bytes, {chunk.uncompressed_size} declared")
+    return raw
+
+
+def _chunk_records(chunk: "Chunk", scan: _Scan) -> list:
+    """The schema, channel and message records of a chunk, checked (see the module docstring);
+    _Malformed if the chunk fails a check. Its definitions enter ``scan`` only if it passes."""
+    from mcap.opcode import Opcode
+    from mcap.records import Message
+
+    raw = _check_chunk(chunk)
+    n = len(raw)
     schemas, channels = dict(scan.schemas), dict(scan.channels)
     out, pos, f = [], 0, BytesIO(raw)
     while pos < n:
@@ -404,6 +484,7 @@ class _Rebuilt:
 
         self.writer = Writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
+        write_chunk_crcs(self.writer.storage)
         self.path = path
         self.conns: dict[int, Any] = {}  # MCAP channel id → rosbags connection
         self.by_key: dict[tuple, Any] = {}  # (topic, type, format, QoS) → connection: equal channels merged
@@ -659,7 +740,10 @@ def _bag_and_mcap(path: Path) -> tuple[Path, Path]:
     if len(files) > 1:
         raise RecoverError(f"{path}: holds {len(files)} .mcap files ({', '.join(p.name for p in files)}); "
                            "recover handles a one-file bag, as gyro_sim records")
-    if _metadata_ok(path) and mcap_closed(files[0]):
+    if not _starts_as_mcap(files[0]):
+        raise RecoverError(f"{path}: {files[0].name}: not an MCAP file (no MCAP magic at its start); the bag is "
+                           "left as it was")
+    if _metadata_ok(path) and mcap_closed(files[0]) and not damaged_chunks(files[0]):
         raise RecoverError(f"{path}: nothing to recover: the bag is complete "
                            f"({files[0].name} is closed and metadata.yaml is there)")
     if _locked(files[0]):
@@ -702,6 +786,10 @@ def recover_bag(path: Union[str, os.PathLike]) -> dict[str, Any]:
         except OSError as exc:
             raise RecoverError(f"{given}: cannot put the recovered bag in place: {exc}; the bag is left as it "
                                "was") from None
+        try:  # the space reserve an older recorder left in the folder when it was killed (4 MiB)
+            (bag / RESERVE_NAME).unlink()
+        except OSError:
+            pass
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return {

@@ -15,7 +15,9 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence, Uni
 import yaml
 
 from gyro_sim import __version__
-from gyro_sim.io.bag_format import _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, _typestore
+from gyro_sim.io.bag_format import (  # noqa: F401 (RESERVE_NAME: re-exported)
+    _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, write_chunk_crcs,
+)
 from gyro_sim.io.messages import (
     QOS, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_SCENE,
     TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPIC_TF_STATIC, TOPICS,
@@ -54,11 +56,12 @@ def _qos(topic: str):
 #: the scene) is written out with the first message
 CHUNK_SPAN = 1.0
 CHUNK_WALL = 1.0
-#: bytes a recorder keeps allocated next to its bag (``.gyro_sim_reserve``) while writing; freed to close the bag
-#: when the disk fills (its summary and metadata.yaml need room); grows by RESERVE_PER_CHUNK per chunk written
+#: bytes a recorder keeps allocated in its bag's file system while writing; freed to close the bag when the disk
+#: fills (its summary and metadata.yaml need room); grows by RESERVE_PER_CHUNK per chunk written. The reserve is a
+#: file without a name (O_TMPFILE, or unlinked as soon as it is made): its space goes back when its descriptor
+#: closes, also when the process is killed (kill -9), so it never outlives its run
 RESERVE_BYTES = 4 << 20
 RESERVE_PER_CHUNK = 512
-RESERVE_NAME = ".gyro_sim_reserve"
 #: free space a recording wants before it starts (the reserve and the first chunks): checked up front
 MIN_FREE_BYTES = 16 << 20
 
@@ -102,6 +105,21 @@ def check_write_target(path: Union[str, os.PathLike], what: str = "bag output") 
     if free < MIN_FREE_BYTES:
         raise RecordingError(f"{what} {str(path)!r}: only {free / 2**20:.1f} MiB free on {str(base)!r}; a recording "
                              f"needs at least {MIN_FREE_BYTES / 2**20:.0f} MiB to start")
+
+
+def _nameless_file(folder: Path) -> int:
+    """A descriptor of a new file in ``folder``'s file system that has no name: O_TMPFILE where the file system
+    has it, else a file made with a free name and unlinked at once. Its space is freed when it is closed,
+    whoever closes it (the kernel, for a killed process)."""
+    try:
+        return os.open(folder, os.O_TMPFILE | os.O_WRONLY, 0o600)
+    except (AttributeError, OSError):  # (no O_TMPFILE here, or a file system without it)
+        pass
+    import tempfile
+
+    fd, name = tempfile.mkstemp(prefix=".gyro_sim_reserve-", dir=folder)
+    os.unlink(name)
+    return fd
 
 
 class BagRecorder:
@@ -187,6 +205,7 @@ class BagRecorder:
             self._reserve(RESERVE_BYTES)
         except BaseException as e:
             self._writer = None
+            self._free_reserve()
             writer.abort()
             self._remove_new(path, top)
             if isinstance(e, OSError) and not isinstance(e, RecordingError):
@@ -232,6 +251,7 @@ class BagRecorder:
         """Make the MCAP storage flush every chunk it closes and remember the state after it (see :meth:`_salvage`).
         (rosbags' McapWriter closes a chunk at 1 MiB by calling its own ``close_chunk``.)"""
         st = self._writer.storage
+        write_chunk_crcs(st)  # (each chunk with its CRC: a damaged chunk is detected)
         close_chunk = st.close_chunk
 
         def close_and_flush() -> None:
@@ -256,18 +276,14 @@ class BagRecorder:
     def _reserve(self, size: int) -> None:
         """Keep ``size`` bytes allocated in the reserve file (raises OSError when the disk has no room)."""
         if self._reserve_fd is None:
-            self._reserve_fd = os.open(self.path / RESERVE_NAME, os.O_CREAT | os.O_WRONLY | os.O_EXCL, 0o600)
+            self._reserve_fd = _nameless_file(self.path)
         os.posix_fallocate(self._reserve_fd, 0, size)
         self._reserved = size
 
     def _free_reserve(self) -> None:
         fd, self._reserve_fd = self._reserve_fd, None
         if fd is not None:
-            os.close(fd)
-            try:
-                os.unlink(self.path / RESERVE_NAME)
-            except OSError:
-                pass
+            os.close(fd)  # (a file without a name: its blocks are freed here)
 
     def _maybe_close_chunk(self, ns: int) -> None:
         """Write the open chunk out if it is the first (definitions and scene), spans ``chunk_span`` simulated

@@ -18,7 +18,8 @@ from gyro_sim.engine.simulate import Runner
 
 
 def rerun_bag(path) -> dict:
-    """Re-simulate a bag; returns sample count, largest |Δ| of L, q, Ω_b, torque and whether all are 0."""
+    """Re-simulate a bag; returns sample count, largest |Δ| of L, q, Ω_b, torque and whether all are 0 (a bag
+    without a state sample, cut before its first one: nothing re-run, ``samples_recorded`` 0)."""
     b = read_bag(path)
     if not b.scene_text:
         raise SceneError(f"{path}: the bag holds no scene; it was not written by gyro_sim")
@@ -27,6 +28,10 @@ def rerun_bag(path) -> dict:
     period = b.custom.get("gyro_sim.control_period")  # the node's ticks (set for scenes without a controller too)
     # the run's accuracy plan and error control were made for its planned duration (an interrupted bag ends before)
     planned = b.custom.get("gyro_sim.planned_duration")
+    if not len(b.t):  # a recording stopped before its first sample: a valid empty bag, nothing to re-run
+        return {"samples_recorded": 0, "samples_rerun": 0, "max_abs_diff": {k: 0.0 for k in ("L", "q", "omega_b",
+                                                                                             "torque")},
+                "identical": True, "unapplied_commands": len(b.command_t)}
     runner = Runner(scene, float(b.t[-1]), attitude=True,  # bags are recorded with the attitude
                     control_period=float(period) if period else None,
                     horizon=float(planned) if planned else None, force=True)  # (the run was made once)

@@ -109,7 +109,7 @@ from gyro_sim.scenes.tolerance import DEFAULT_ATTITUDE, DEFAULT_PHASE, DEFAULT_R
 from gyro_sim.scenes.scene_text import SceneError, clip, human_bytes, parse_scene_text, preview, read_scene_file
 
 __all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir",
-           "parse_scene_text", "result_size", "max_result_bytes", "MAX_RESULT_BYTES"]
+           "parse_scene_text", "result_size", "check_command_times", "max_result_bytes", "MAX_RESULT_BYTES"]
 
 MAX_WINDOW_SAMPLES = 1e7  # output samples one window may ask for (memory: ~1 kB each with 50 modes)
 MAX_WINDOWS = 100  # output windows of a scene (each one is merged into the sample times on its own)
@@ -439,8 +439,9 @@ def _eddy_modes(scene: "Scene") -> int:
     return mode_plan(scene, quiet=True).n
 
 
-def result_size(scene: "Scene") -> tuple[float, float, int]:
-    """(output samples, controller ticks, bytes per row) of a run of ``scene`` to its ``duration``, counted
+def result_size(scene: "Scene", duration: Optional[float] = None) -> tuple[float, float, int]:
+    """(output samples, controller ticks, bytes per row) of a run of ``scene`` to its ``duration`` (or to
+    ``duration`` s where given: a run cut short or made longer, ``gyro-sim run --duration``), counted
     without allocating; the result takes at most (samples + ticks) × bytes per row.
 
     Samples: an upper bound on the output instants (:meth:`Output.sample_count`: rate, duration, windows).
@@ -448,7 +449,7 @@ def result_size(scene: "Scene") -> tuple[float, float, int]:
     a tick logs a command, counted as one more row. Bytes per row: 8 bytes (float64) × (t 1 + L 3 + q 4 +
     Ω 3 + torque 3 + energy 1 + Euler angles 3 + 3 per stator (current, rate, phase) + 3 per eddy mode) as
     a :class:`gyro_sim.simulate.RunResult` holds them (the effects' outputs are not counted)."""
-    T = scene.duration
+    T = scene.duration if duration is None else float(duration)
     samples = scene.output.sample_count(T)
     ticks = 0.0
     if scene.controller is not None:  # the period of gyro_sim.simulate.controller_period
@@ -457,17 +458,22 @@ def result_size(scene: "Scene") -> tuple[float, float, int]:
     return samples, ticks, row
 
 
-def check_result_size(scene: "Scene") -> None:
+def check_result_size(scene: "Scene", duration: Optional[float] = None, name: str = "duration") -> None:
     """ValueError (one line: samples, bytes per sample, total, the limit and what to lower) if a run of
-    ``scene`` would hold more than :func:`max_result_bytes` in memory."""
-    samples, ticks, row = result_size(scene)
+    ``scene`` (to ``duration`` s where given, named ``name`` in the message, e.g. ``--duration``) would hold
+    more than :func:`max_result_bytes` in memory."""
+    T = scene.duration if duration is None else float(duration)
+    samples, ticks, row = result_size(scene, T)
     total, limit = (samples + ticks) * row, max_result_bytes()
-    if total > limit:
+    if not total <= limit:  # (NaN or inf too: a duration of 1e308 s)
         ctl = f" + {ticks:.3g} controller ticks" if ticks else ""
+        tick_rate = 1.0 / (scene.controller.period or 1.0 / scene.output.rate) if scene.controller else 0.0
+        per_s = row * (scene.output.rate + sum(w.rate for w in scene.output.windows) + tick_rate)  # (bytes/s, ≥)
+        fits = f" (about {limit / per_s:.2g} s fits)" if per_s > 0 and math.isfinite(per_s) else ""
         raise ValueError(
-            f"duration = {scene.duration:g} s at output.rate = {scene.output.rate:g} /s: a run would hold "
+            f"{name} = {T:g} s at output.rate = {scene.output.rate:g} /s: a run would hold "
             f"{samples:.3g} output samples{ctl} × {row} bytes = {total:.3g} bytes ({human_bytes(total)}) in "
-            f"memory; the limit is {limit:.3g} bytes ({human_bytes(limit)}, {RESULT_BYTES_ENV}): lower duration, "
+            f"memory; the limit is {limit:.3g} bytes ({human_bytes(limit)}, {RESULT_BYTES_ENV}): lower {name}{fits}, "
             f"output.rate or output.windows{', or raise controller.period' if ticks else ''}")
 
 
@@ -599,9 +605,27 @@ def load_scene(name_or_path: Union[str, Path], overrides: Optional[dict] = None)
                 f"built-in scenes: {', '.join(scenes) or 'none found'}"
             )
     data = parse_scene_text(read_scene_file(p), str(p))
+    written = data.get("duration") if isinstance(data, dict) else None  # (before the overrides)
     if overrides:
         data = apply_overrides(data, overrides)
-    return scene_from_dict(data, where=str(p), default_name=p.stem)
+    scene = scene_from_dict(data, where=str(p), default_name=p.stem)
+    check_command_times(scene, written, where=str(p))
+    return scene
+
+
+def check_command_times(scene: Scene, written: Any = None, where: str = "") -> None:
+    """SceneError (one line: the command's field, its time and the allowed range) for a scheduled command at or
+    after the end of the run, which would never be applied. The end is the scene's ``duration``, or the one its
+    file says where that is longer (``written``, before an override shortened the run: the commands after the
+    shortened end are the part of the scene the run leaves out)."""
+    end = scene.duration
+    if isinstance(written, (int, float)) and not isinstance(written, bool) and math.isfinite(written):
+        end = max(end, float(written))
+    for i, c in enumerate(scene.commands):
+        if not c.time < end:
+            head = f"invalid scene {where}" if where else "invalid scene"
+            raise SceneError(f"{head}: commands.{i}.time = {c.time:g} s: at or after the end of the run, it would "
+                             f"never be applied; allowed: 0 <= time < {end:g} s (duration)")
 
 
 def apply_overrides(data: dict, overrides: dict) -> dict:
