@@ -6,6 +6,8 @@ control), in CPU seconds of this process (``time.process_time``; ratios from one
 1200 s, the 20-minute spin-up, and 2000 s in full mode): steps, CPU, CPU per simulated second, the real-time factor
 in CPU, the run's own error estimate (L, the axis' directions, the spin phase against their tolerances), and the
 same duration at the old defaults. Cost linear in duration: CPU per simulated second within 2x across the durations.
+Then every built-in scene over its own duration, as shipped and at the old defaults (``scene_rows``: steps, CPU,
+the estimate against the scene's tolerances).
 """
 from __future__ import annotations
 
@@ -13,16 +15,20 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from typing import Optional
 
 QUICK_DURATIONS = (2.0, 20.0, 60.0, 200.0)
 FULL_DURATIONS = (2.0, 20.0, 60.0, 200.0, 1200.0, 2000.0)
 SCENE = "spinup_thin_shell"
+#: the scenes run over their own durations (None: every built-in scene)
+SCENES: Optional[tuple] = None
 
 
 @dataclass
 class CostRow:
     duration: float
     what: str  # "as shipped", "old defaults"
+    scene: str = SCENE
     steps: int = 0
     cpu: float = math.nan
     estimate: str = ""
@@ -42,17 +48,19 @@ class CostRow:
 @dataclass
 class CostResults:
     rows: list = field(default_factory=list)
+    scene_rows: list = field(default_factory=list)  # every built-in scene over its own duration
 
 
-def _one(T: float, old: bool) -> CostRow:
+def _one(T: float, old: bool, name: str = SCENE) -> CostRow:
     from gyro_sim.engine.simulate import run
     from gyro_sim.scenes.scene import load_scene
     from gyro_sim.scenes.tolerance import legacy
 
-    scene = load_scene(SCENE, overrides={"duration": T})
-    row = CostRow(T, "old defaults" if old else "as shipped")
+    scene = load_scene(name, overrides={"duration": T})
+    row = CostRow(T, "old defaults" if old else "as shipped", name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        run(scene, duration=min(T, 0.05), force=True)  # (its kernels loaded: the row times the run)
         c0 = time.process_time()
         if old:
             with legacy():
@@ -77,7 +85,22 @@ def cost_part(res, quick: bool, say=print) -> CostResults:
             out.rows.append(row)
             say(f"[cost] {SCENE} {T:g} s {row.what}: {row.steps} steps, {row.cpu:.3f} s CPU "
                 f"({row.realtime:.0f}x real time), {row.estimate}")
+    from gyro_sim.scenes.scene import builtin_scenes, load_scene
+
+    for name in SCENES if SCENES is not None else builtin_scenes():
+        T = load_scene(name).duration
+        for old in (False, True):
+            row = _one(T, old, name)
+            out.scene_rows.append(row)
+            say(f"[cost] {name} {T:g} s {row.what}: {row.steps} steps, {row.cpu:.3f} s CPU, {row.estimate}")
     return out
+
+
+def scene_ratios(cost: CostResults) -> dict:
+    """{scene: CPU as shipped over CPU at the old defaults} of the built-in scenes' rows."""
+    by = {(r.scene, r.what): r for r in cost.scene_rows}
+    return {n: by[(n, "as shipped")].cpu / by[(n, "old defaults")].cpu for n, w in by if w == "as shipped"
+            and (n, "old defaults") in by and by[(n, "old defaults")].cpu > 0}
 
 
 def linearity(cost: CostResults) -> float:
@@ -102,6 +125,17 @@ def markdown_lines(res) -> list[str]:
                      f"{r.realtime:.0f}x | {r.estimate} |")
     lines += ["", f"CPU per simulated second, as shipped, from 20 s on: largest / smallest = {linearity(cost):.2f}.",
               ""]
+    if cost.scene_rows:
+        ratios = scene_ratios(cost)
+        by = {(r.scene, r.what): r for r in cost.scene_rows}
+        lines += ["### Every built-in scene over its own duration", "",
+                  "| scene | duration s | as shipped: steps, CPU s | its estimate | old defaults: steps, CPU s | "
+                  "their estimate | CPU ratio |", "|---|---|---|---|---|---|---|"]
+        for n, ratio in ratios.items():
+            a, o = by[(n, "as shipped")], by[(n, "old defaults")]
+            lines.append(f"| {n} | {a.duration:g} | {a.steps}, {a.cpu:.3f} | {a.estimate} | {o.steps}, {o.cpu:.3f} | "
+                         f"{o.estimate} | {ratio:.2f}x |")
+        lines.append("")
     return lines
 
 
@@ -118,4 +152,10 @@ def headline(res) -> list[str]:
         out.append(f"cost: {SCENE} {T:g} s as shipped: {r.steps} steps, {r.cpu:.3f} s CPU, {r.realtime:.0f}x real "
                    f"time{ratio}; {'met' if r.met else 'NOT met'}")
     out.append(f"cost: CPU per simulated second from 20 s on within {linearity(cost):.2f}x")
+    ratios = scene_ratios(cost)
+    if ratios:
+        worst = max(ratios, key=ratios.get)
+        met = sum(1 for r in cost.scene_rows if r.what == "as shipped" and r.met)
+        out.append(f"cost: built-in scenes as shipped against the old defaults: {ratios[worst]:.2f}x at most "
+                   f"({worst}); {met} of {len(ratios)} meet their accuracy by their own estimate")
     return out

@@ -37,6 +37,7 @@ import sys
 from pathlib import Path
 
 from gyro_sim import __version__
+from gyro_sim.common.extras import MissingExtra
 from gyro_sim.apps.console import _write
 
 # the commands, by group, and what they share (re-exported: `cli._cmd_scenes` and the like are the names the parser
@@ -271,9 +272,8 @@ def main(argv=None) -> int:
     """Entry point of ``gyro-sim``; returns the exit status.
 
     A missing optional dependency (:class:`gyro_sim.extras.MissingExtra`) ends the command with one ``error:`` line,
-    status 2; stdout closed by its reader (``gyro-sim scenes | head -1``) ends it quietly, status 141."""
-    from gyro_sim.common.extras import MissingExtra
-
+    status 2; stdout closed by its reader (``gyro-sim scenes | head -1``) ends it quietly, status 141. (Its first
+    statement is the ``try``: a Ctrl-C from the call on is handled.)"""
     try:
         try:
             status = _main(argv)
