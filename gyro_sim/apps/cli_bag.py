@@ -8,7 +8,7 @@ from pathlib import Path
 
 from gyro_sim.apps.console import _write
 from gyro_sim.apps.cli_common import (
-    EXIT_OK, EXIT_USAGE, _error, _num, _ros_missing, format_summary,
+    EXIT_FAILURE, EXIT_OK, EXIT_USAGE, _error, _num, _ros_missing, format_summary,
 )
 
 
@@ -60,6 +60,9 @@ def _bag_result(bag: Path):
                "realtime_factor": float(b.t[-1]) / float(wall) if wall else None}
     if est is not None:
         summary.update(error_summary(est))
+    end = str(info.get("end_reason") or "")
+    if end.startswith("failed:"):
+        summary["failure"] = end
     return res, summary, b, info
 
 
@@ -83,6 +86,9 @@ def _summarise_bag(bag: Path, png: Path) -> int:
     _write(sys.stdout, f"{'bag':<16}  {bag} ({info['message_count']} messages)\n")
     if b.status:
         _write(sys.stdout, f"{'last status':<16}  {b.status[-1]}\n")
+    if summary.get("failure"):  # (the run's state broke: the bag holds it up to the last sound sample)
+        _write(sys.stderr, f"error: the run {summary['failure']}\n")
+        return EXIT_FAILURE
     return EXIT_OK
 
 
