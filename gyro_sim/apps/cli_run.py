@@ -196,8 +196,9 @@ def _cmd_run(args) -> int:
     _write(sys.stdout, format_summary(name, result.preview().summary(), png))
     if args.record is not None:
         _write(sys.stdout, f"{'bag':<16}  {args.record}\n")
-    if result.failure is not None:  # (its state broke: the run stopped there; the bag's end says so too)
-        _write(sys.stderr, f"error: the run {result.failure}\n")
+    failure = getattr(result, "failure", None)  # (its state broke: the run stopped there; the bag's end says so too)
+    if failure is not None:
+        _write(sys.stderr, f"error: the run {failure}\n")
         return EXIT_FAILURE
     return EXIT_OK
 
