@@ -14,6 +14,7 @@ from typing import Callable, Iterable, Optional
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from gyro_sim.io.messages import QOS, stamp_ns
+from gyro_sim.scenes.limits import real_value
 from gyro_sim.scenes.scene_text import clip, preview
 from gyro_sim.ros.launch import PARENT_PID_ENV, STOP_SIGNALS, signal_name  # (launch.py: no rclpy)
 
@@ -116,13 +117,13 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
     if n_cur != n:
         return f"effort = {preview(list(msg.effort[:8]))}: one current (A) per name expected ({n} names, {n_cur} values)"
     for name, c in zip(names, msg.effort):
-        if not (_is_real(c) and math.isfinite(c) and c >= 0):
+        if not (_is_real(c) and math.isfinite(real_value(c)) and c >= 0):
             return f"effort[{name}] = {preview(c)}: current must be finite and ≥ 0 A"
     if n_rate and n_rate != n:
         return (f"velocity = {preview(list(msg.velocity[:8]))}: empty or one rate (rad/s) per name expected "
                 f"({n} names, {n_rate} values)")
     for name, r in zip(names, msg.velocity):
-        if not (_is_real(r) and math.isfinite(r)):
+        if not (_is_real(r) and math.isfinite(real_value(r))):
             return f"velocity[{name}] = {preview(r)}: field rate must be finite (rad/s)"
     if limits is not None:
         index = {n: k for k, n in enumerate(stators)}

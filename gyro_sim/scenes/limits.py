@@ -40,10 +40,11 @@ from typing import Iterator, Optional
 
 import numpy as np
 
+from gyro_sim.scenes.scene_text import preview
 from gyro_sim.scenes.tolerance import field_rates, law_limits
 
 __all__ = ["MAX_FIELD", "MAX_RATE", "MAX_INERTIA_RATIO", "LIMIT_MARGIN", "FIELD_FLOOR", "RATE_FLOOR", "stator_limits",
-           "check_scene_limits", "command_problem", "L_limit", "L_MARGIN"]
+           "check_scene_limits", "command_problem", "real_value", "L_limit", "L_MARGIN"]
 
 #: T: the largest field amplitude of one stator (b_k I_k) or of one general field term a scene may name
 MAX_FIELD = 100.0
@@ -176,7 +177,7 @@ def check_scene_limits(scene) -> None:
             raise ValueError(f"stators.{i}.max_rate = {_g(s.max_rate)} rad/s: beyond MAX_RATE = {MAX_RATE:g} rad/s")
         for key, c in _stator_currents(scene, s.name):
             if c > cap:
-                raise ValueError(f"{key} = {_g(c)} A: stator {s.name!r} would make b·I = {_g(s.coil_constant * c)} T, "
+                raise ValueError(f"{key} = {_g(c)} A: stator {preview(s.name, 40)} would make b·I = {_g(s.coil_constant * c)} T, "
                                  f"beyond MAX_FIELD = {MAX_FIELD:g} T ({_g(cap)} A at coil_constant "
                                  f"{_g(s.coil_constant)} T/A)")
         for key, r in _stator_rates(scene, s.name):
@@ -186,11 +187,11 @@ def check_scene_limits(scene) -> None:
     for i, s in enumerate(scene.stators):
         for key, c in _stator_currents(scene, s.name):
             if c > cur[i]:
-                raise ValueError(f"{key} = {_g(c)} A: beyond stator {s.name!r}'s largest current "
+                raise ValueError(f"{key} = {_g(c)} A: beyond stator {preview(s.name, 40)}'s largest current "
                                  f"stators.{i}.max_current = {_g(cur[i])} A")
         for key, r in _stator_rates(scene, s.name):
             if abs(r) > rate[i]:
-                raise ValueError(f"{key} = {_g(r)} rad/s: beyond stator {s.name!r}'s largest field rate "
+                raise ValueError(f"{key} = {_g(r)} rad/s: beyond stator {preview(s.name, 40)}'s largest field rate "
                                  f"stators.{i}.max_rate = {_g(rate[i])} rad/s")
 
 
@@ -213,22 +214,30 @@ def L_limit(scene, max_rate: np.ndarray, effect_rate: float = 0.0) -> float:
     return L_MARGIN * max(J) * om
 
 
+def real_value(x) -> float:
+    """``x`` as a float; NaN where it has none (an integer beyond the floats, 10**400: OverflowError otherwise)."""
+    try:
+        return float(x)
+    except (OverflowError, TypeError, ValueError):
+        return math.nan
+
+
 def command_problem(sim, k: int, current: Optional[float], rate: Optional[float]) -> str:
     """'' if commanding stator ``k`` of simulator ``sim`` (its ``stator_names``, ``max_current``, ``max_rate``) to
     ``current`` A / ``rate`` rad/s (None: unchanged) is allowed, else the one-line reason naming the stator, the
     value and the limit (the in-process :meth:`Simulator.set_stators` and the simulator node's commands say the
     same)."""
-    name = sim.stator_names[k]
+    name = preview(sim.stator_names[k], 40)
     if current is not None:
-        if not (math.isfinite(current) and current >= 0):
-            return f"stator {name!r}: current = {current!r}: must be finite and ≥ 0 A"
+        if not (math.isfinite(real_value(current)) and current >= 0):
+            return f"stator {name}: current = {preview(current)}: must be finite and ≥ 0 A"
         if current > sim.max_current[k]:
-            return (f"stator {name!r}: current = {_g(current)} A: beyond its largest current {_g(sim.max_current[k])} A "
+            return (f"stator {name}: current = {_g(current)} A: beyond its largest current {_g(sim.max_current[k])} A "
                     f"(stators.{k}.max_current)")
     if rate is not None:
-        if not math.isfinite(rate):
-            return f"stator {name!r}: rate = {rate!r}: must be finite (rad/s)"
+        if not math.isfinite(real_value(rate)):
+            return f"stator {name}: rate = {preview(rate)}: must be finite (rad/s)"
         if abs(rate) > sim.max_rate[k]:
-            return (f"stator {name!r}: rate = {_g(rate)} rad/s: beyond its largest field rate "
+            return (f"stator {name}: rate = {_g(rate)} rad/s: beyond its largest field rate "
                     f"{_g(sim.max_rate[k])} rad/s (stators.{k}.max_rate)")
     return ""
