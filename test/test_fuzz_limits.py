@@ -85,8 +85,8 @@ def _get(doc, path):
 
 @st.composite
 def extreme_scenes(draw):
-    """A built-in scene with 1-4 numbers replaced by extreme values or scaled by 10^±3 or 10^±20, maybe a physical limit set to
-    an extreme value, maybe its name, description and a stator's name in random unicode."""
+    """A built-in scene with 1-4 numbers replaced by extreme values or scaled by 10^±3 or 10^±20, maybe a physical
+    limit set to an extreme value, maybe its name, description and a stator's name in random unicode."""
     doc = copy.deepcopy(draw(st.sampled_from(BASES)))
     doc["duration"] = draw(st.one_of(st.just(RUN_T), st.just(RUN_T), EXTREME))
     for _ in range(draw(st.integers(1, 4))):
@@ -217,7 +217,7 @@ def _command_run(commands, over_ros: bool, tally: Counter) -> str:
                     assert "\n" not in str(e) and len(str(e)) < 400
                     tally["refused"] += 1
                     after = (r.sim.y, r.sim.current, r.sim.rate)
-                    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(before, after))
+                    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(before, after, strict=True))
         r.advance()
     return _sound(r.result())
 

@@ -24,7 +24,7 @@ from gyro_sim.io.recording import record_run
 from gyro_sim.io.results import read_bag
 from gyro_sim.scenes.limits import (FIELD_FLOOR, LIMIT_MARGIN, MAX_FIELD, MAX_INERTIA_RATIO, MAX_RATE, RATE_FLOOR,
                                     stator_limits)
-from gyro_sim.scenes.scene import SceneError, load_scene, scene_from_dict
+from gyro_sim.scenes.scene import SceneError, load_scene
 
 
 def one_line(exc) -> str:

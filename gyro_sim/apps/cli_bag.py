@@ -53,7 +53,7 @@ def _bag_result(bag: Path):
     wall = info["custom"].get("gyro_sim.wall_time")
     steps = info["custom"].get("gyro_sim.steps")
     est = parse_error_estimate(info["custom"].get("gyro_sim.error_estimate"))
-    summary = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
+    summary: dict = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
                "theta_deg": float(np.degrees(b.euler[-1, 1])), "L_norm": float(np.linalg.norm(b.L[-1])),
                "energy": float(energy[-1]), "t_end": float(b.t[-1]),
                "wall_time": float(wall) if wall else None, "steps": int(steps) if steps else None,

@@ -127,12 +127,12 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
             return f"velocity[{name}] = {preview(r)}: field rate must be finite (rad/s)"
     if limits is not None:
         index = {n: k for k, n in enumerate(stators)}
-        for name, c in zip(names, msg.effort):
+        for name, c in zip(names, msg.effort, strict=True):
             lim = float(limits[0][index[name]])
             if c > lim:
                 return (f"effort[{name}] = {float(c):.6g}: beyond stator {name!r}'s largest current {lim:.6g} A "
                         f"(max_current of the scene's stator)")
-        for name, r in zip(names, msg.velocity):
+        for name, r in zip(names, msg.velocity, strict=True):
             lim = float(limits[1][index[name]])
             if abs(r) > lim:
                 return (f"velocity[{name}] = {float(r):.6g}: beyond stator {name!r}'s largest field rate {lim:.6g} "

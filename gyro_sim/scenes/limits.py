@@ -177,7 +177,8 @@ def check_scene_limits(scene) -> None:
             raise ValueError(f"stators.{i}.max_rate = {_g(s.max_rate)} rad/s: beyond MAX_RATE = {MAX_RATE:g} rad/s")
         for key, c in _stator_currents(scene, s.name):
             if c > cap:
-                raise ValueError(f"{key} = {_g(c)} A: stator {preview(s.name, 40)} would make b·I = {_g(s.coil_constant * c)} T, "
+                raise ValueError(f"{key} = {_g(c)} A: stator {preview(s.name, 40)} would make b·I = "
+                                 f"{_g(s.coil_constant * c)} T, "
                                  f"beyond MAX_FIELD = {MAX_FIELD:g} T ({_g(cap)} A at coil_constant "
                                  f"{_g(s.coil_constant)} T/A)")
         for key, r in _stator_rates(scene, s.name):

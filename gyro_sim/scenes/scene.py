@@ -166,7 +166,7 @@ class Rotor(_Strict):
     inertia: Annotated[list[real(ge=1e-15, le=1e6)],
                        Field(min_length=3, max_length=3)]  # kg·m²
     conductor: Optional[Conductor] = None
-    max_inertia_ratio: Optional[real(ge=1.0)] = None  # largest J_max/J_min (default: limits.MAX_INERTIA_RATIO)
+    max_inertia_ratio: Optional[Positive] = None  # largest J_max/J_min (default: limits.MAX_INERTIA_RATIO)
 
     @field_validator("inertia")
     @classmethod
