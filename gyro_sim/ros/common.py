@@ -130,13 +130,13 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
         for name, c in zip(names, msg.effort, strict=True):
             lim = float(limits[0][index[name]])
             if c > lim:
-                return (f"effort[{name}] = {float(c):.6g}: beyond stator {name!r}'s largest current {lim:.6g} A "
-                        f"(max_current of the scene's stator)")
+                return (f"effort[{name}] = {float(c):.6g}: beyond {lim:.6g} A, the largest current of stator "
+                        f"{name!r} (its max_current in the scene)")
         for name, r in zip(names, msg.velocity, strict=True):
             lim = float(limits[1][index[name]])
             if abs(r) > lim:
-                return (f"velocity[{name}] = {float(r):.6g}: beyond stator {name!r}'s largest field rate {lim:.6g} "
-                        f"rad/s (max_rate of the scene's stator)")
+                return (f"velocity[{name}] = {float(r):.6g}: beyond {lim:.6g} rad/s, the largest field rate of stator "
+                        f"{name!r} (its max_rate in the scene)")
     return ""
 
 

@@ -188,12 +188,12 @@ def check_scene_limits(scene) -> None:
     for i, s in enumerate(scene.stators):
         for key, c in _stator_currents(scene, s.name):
             if c > cur[i]:
-                raise ValueError(f"{key} = {_g(c)} A: beyond stator {preview(s.name, 40)}'s largest current "
-                                 f"stators.{i}.max_current = {_g(cur[i])} A")
+                raise ValueError(f"{key} = {_g(c)} A: beyond {_g(cur[i])} A, the largest current of stator "
+                                 f"{preview(s.name, 40)} (stators.{i}.max_current)")
         for key, r in _stator_rates(scene, s.name):
             if abs(r) > rate[i]:
-                raise ValueError(f"{key} = {_g(r)} rad/s: beyond stator {preview(s.name, 40)}'s largest field rate "
-                                 f"stators.{i}.max_rate = {_g(rate[i])} rad/s")
+                raise ValueError(f"{key} = {_g(r)} rad/s: beyond {_g(rate[i])} rad/s, the largest field rate of stator "
+                                 f"{preview(s.name, 40)} (stators.{i}.max_rate)")
 
 
 def L_limit(scene, max_rate: np.ndarray, effect_rate: float = 0.0) -> float:
