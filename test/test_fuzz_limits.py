@@ -54,6 +54,9 @@ EXTREME = st.one_of(
     st.floats(-1e4, 1e4),
     st.integers(-10 ** 6, 10 ** 6),
 )
+#: keys of the physical values (currents, rates, spins, moments, fields): half of the edits go to a number below one
+PHYSICAL = {"current", "rate", "spin", "inertia", "coil_constant", "target_spin", "nu", "spin_rate", "frequency",
+            "kinetic_moment", "control_current", "spin_current", "real"}
 LIMIT_KEYS = (("stators", "max_current"), ("stators", "max_rate"), ("rotor", "max_inertia_ratio"))
 
 
@@ -90,7 +93,9 @@ def extreme_scenes(draw):
     doc = copy.deepcopy(draw(st.sampled_from(BASES)))
     doc["duration"] = draw(st.one_of(st.just(RUN_T), st.just(RUN_T), EXTREME))
     for _ in range(draw(st.integers(1, 4))):
-        path = draw(st.sampled_from(_numbers(doc)))
+        paths = _numbers(doc)
+        physical = [p for p in paths if any(str(k) in PHYSICAL for k in p)]
+        path = draw(st.sampled_from(physical if physical and draw(st.booleans()) else paths))
         if draw(st.booleans()):
             _set(doc, path, draw(EXTREME))
         else:

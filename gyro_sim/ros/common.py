@@ -132,7 +132,7 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
             if c > lim:
                 return (f"effort[{name}] = {float(c):.6g}: beyond {lim:.6g} A, the largest current of stator "
                         f"{name!r} (its max_current in the scene)")
-        for name, r in zip(names, msg.velocity, strict=True):
+        for name, r in zip(names, msg.velocity if n_rate else [0.0] * n, strict=True):  # (empty: unchanged)
             lim = float(limits[1][index[name]])
             if abs(r) > lim:
                 return (f"velocity[{name}] = {float(r):.6g}: beyond {lim:.6g} rad/s, the largest field rate of stator "
