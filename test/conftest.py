@@ -1,9 +1,12 @@
-"""pytest options: ``--stress`` runs the long stress versions (marker ``slow``)."""
+"""pytest options: ``--stress`` runs the long stress versions (marker ``slow``); ``--fuzz-long`` runs the
+property-based tests of test/test_fuzz_limits.py with thousands of examples (default: a few hundred in all)."""
 import pytest
 
 
 def pytest_addoption(parser):
     parser.addoption("--stress", action="store_true", default=False, help="also run the long (slow) stress tests")
+    parser.addoption("--fuzz-long", action="store_true", default=False,
+                     help="run the fuzz tests of test_fuzz_limits.py with thousands of examples")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -100,8 +100,11 @@ def test_looser_tolerance_fewer_modes_and_tail_choice():
 
 def test_command_beyond_the_plan_warns_once():
     """A command faster than anything in the scene (here: through Simulator.set_stator, as the ROS node does)
-    passes the slip the modes were chosen for: one warning, and slip_met records it."""
-    s = field_scene("solid_sphere", 1)
+    passes the slip the modes were chosen for: one warning, and slip_met records it. (The stator's ``max_rate`` lets
+    the command through: by default a rate 10 times the scene's is refused, issue 29.)"""
+    t1 = tau1("solid_sphere")
+    s = field_scene("solid_sphere", 1, stators=[{"name": "z3", "axis": [0, 0, 1], "coil_constant": B0, "current": 1.0,
+                                                 "rate": 1 / t1, "max_rate": 2000 / t1}])
     sim = Simulator(s)
     n = sim.mode_plan.n
     sim.advance(1e-3)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from gyro_sim.apps.console import _write
 from gyro_sim.apps.cli_common import (
-    EXIT_OK, EXIT_USAGE, _error, _num, _ros_missing, format_summary,
+    EXIT_FAILURE, EXIT_OK, EXIT_USAGE, _error, _num, _ros_missing, format_summary,
 )
 
 
@@ -74,13 +74,16 @@ def _bag_result(bag: Path):
     wall = info["custom"].get("gyro_sim.wall_time")
     steps = info["custom"].get("gyro_sim.steps")
     est = parse_error_estimate(info["custom"].get("gyro_sim.error_estimate"))
-    summary = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
+    summary: dict = {"spin_rate": float(b.omega_b[-1, 2]), "spin_rev_s": float(b.omega_b[-1, 2] / (2 * math.pi)),
                "theta_deg": float(np.degrees(b.euler[-1, 1])), "L_norm": float(np.linalg.norm(b.L[-1])),
                "energy": float(energy[-1]), "t_end": float(b.t[-1]),
                "wall_time": float(wall) if wall else None, "steps": int(steps) if steps else None,
                "realtime_factor": float(b.t[-1]) / float(wall) if wall else None}
     if est is not None:
         summary.update(error_summary(est))
+    end = str(info.get("end_reason") or "")
+    if end.startswith("failed:"):
+        summary["failure"] = end
     return res, summary, b, info
 
 
@@ -109,6 +112,9 @@ def _summarise_bag(bag: Path, png: Path) -> int:
     _write(sys.stdout, f"{'bag':<16}  {bag} ({info['message_count']} messages)\n")
     if b.status:
         _write(sys.stdout, f"{'last status':<16}  {b.status[-1]}\n")
+    if summary.get("failure"):  # (the run's state broke: the bag holds it up to the last sound sample)
+        _write(sys.stderr, f"error: the run {summary['failure']}\n")
+        return EXIT_FAILURE
     return EXIT_OK
 
 

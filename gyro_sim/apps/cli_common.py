@@ -29,7 +29,8 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
     Keys used: spin_rate (rad/s), spin_rev_s (rev/s), theta_deg (deg), L_norm
     (N·m·s), energy (J), t_end (s), wall_time (s), steps, realtime_factor, attitude (False: a run
     without attitude, whose θ is not known and whose spin rate is |Ω|), error_L, error_attitude,
-    accuracy_rtol, accuracy_attitude, accuracy_met (the run's estimated error, gyro_sim.accuracy).
+    accuracy_rtol, accuracy_attitude, accuracy_met (the run's estimated error, gyro_sim.accuracy), failure
+    (``failed: <what> at t = … s``: a run whose state broke).
     Missing keys are shown as '-'.
     """
     s = summary.get
@@ -47,6 +48,8 @@ def format_summary(name: str, summary: dict, plot_path=None) -> str:
         ("steps", _num(s('steps'), 'd')),
         ("real-time factor", _num(s('realtime_factor'), '.4g')),
     ]
+    if s("failure"):  # (the run's state broke: it stopped there, with no error estimate)
+        rows.append(("status", str(s("failure"))))
     if s("error_L") is not None and s("error_L") == s("error_L"):  # (NaN: no estimate)
         eq = s("error_attitude")
         tol_q = s("accuracy_attitude")

@@ -206,6 +206,10 @@ def _cmd_run(args) -> int:
     _write(sys.stdout, format_summary(name, result.preview().summary(), png))
     if args.record is not None:
         _write(sys.stdout, f"{'bag':<16}  {args.record}\n")
+    failure = getattr(result, "failure", None)  # (its state broke: the run stopped there; the bag's end says so too)
+    if failure is not None:
+        _write(sys.stderr, f"error: the run {failure}\n")
+        return EXIT_FAILURE
     return EXIT_OK
 
 
@@ -309,6 +313,9 @@ def _run_ros(args, scene, name) -> int:
                   with_controller=scene.controller is not None, force=args.force)
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
+    if code == EXIT_FAILURE and Path(bag).exists():  # a run whose state broke (its bag's end: failed: ...)
+        status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
+        return status if status != EXIT_OK else EXIT_FAILURE
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
     if code == EXIT_FAILURE and Path(bag).exists():  # its recording failed (a full disk): the bag holds what fit
         return _failed_recording(bag, Path(args.out) / f"{name}.png")

@@ -51,7 +51,8 @@ class RunResult:
     effects: dict = field(default_factory=dict)  # outputs of the effects that are on (Simulator.effect_outputs)
     attitude: bool = True  # whether q was integrated (integrates_attitude)
     # the run's estimated error over its duration, against the scene's accuracy (gyro_sim.accuracy.ErrorEstimate)
-    error_estimate: Optional[ErrorEstimate] = None
+    error_estimate: Optional[ErrorEstimate] = None  # None where the run failed (failure)
+    failure: Optional[str] = None  # "failed: <what> at t = … s" where the run's state broke (Runner), else None
     _euler: Optional[np.ndarray] = field(default=None, repr=False)
     _load: Optional[object] = field(default=None, repr=False, compare=False)  # see lazy()
     _preview: Optional["RunResult"] = field(default=None, repr=False, compare=False)
@@ -64,7 +65,8 @@ class RunResult:
         ``preview``: a decimated copy in memory (:meth:`preview`)."""
         obj = cls.__new__(cls)
         obj.__dict__.update({"averaged_segments": [], "averaged_models": [], "averaged_rhs_evaluations": 0,
-                             "attitude": True, "error_estimate": None, "_euler": None}, **known)
+                             "attitude": True, "error_estimate": None, "failure": None, "_euler": None},
+                            **known)
         obj._load, obj._preview = load, preview
         return obj
 
@@ -134,7 +136,8 @@ class RunResult:
     def summary(self) -> dict:
         """Final values and cost of the run (SI units; θ in degrees, NaN without attitude; spin_rate: see
         :attr:`spin_rate`) and its estimated error (``error_L`` relative, ``error_attitude`` rad, NaN where not a
-        result; ``accuracy_met``: within the scene's ``accuracy``)."""
+        result; ``accuracy_met``: within the scene's ``accuracy``; ``failure``: ``failed: <what> at t = … s`` where the
+        run's state broke and it stopped there, with no error estimate, else None)."""
         t_end = float(self.t[-1])
         return {
             "scene": self.scene.name,
@@ -149,6 +152,7 @@ class RunResult:
             "steps": int(self.steps),
             "realtime_factor": t_end / self.wall_time if self.wall_time > 0 else float("inf"),
             "attitude": self.attitude,
+            "failure": self.failure,
             **error_summary(self.error_estimate),
         }
 

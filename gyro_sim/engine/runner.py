@@ -17,6 +17,7 @@ from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
 from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
 from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
+from gyro_sim.scenes.limits import L_limit
 from gyro_sim.scenes.scene import Scene, SceneError
 from gyro_sim.scenes.tolerance import phase_tolerance
 
@@ -137,11 +138,15 @@ class Runner:
         self._ci = 0
         self.wall_time = 0.0  # s in advance(), numba compile time left out (compile_time)
         self.compile_time = 0.0
+        # the run fails loudly where its state breaks (_check_samples): "failed: <what> at t = … s", else None
+        self.failure: Optional[str] = None
+        self.L_sound = L_limit(scene, self.sim.max_rate, self.sim._effect_rate())  # N m s (scenes/limits.py)
 
     # --- the loop, one break at a time ---------------------------------------------------------
     @property
     def done(self) -> bool:
-        return self._bi >= len(self.breaks) and self.row > 0
+        """The run reached its end, or failed (:attr:`failure`)."""
+        return self.failure is not None or self._bi >= len(self.breaks) and self.row > 0
 
     @property
     def is_control_tick(self) -> bool:
@@ -236,13 +241,15 @@ class Runner:
         with CompileClock() as clock:
             self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
             self._accumulate(sel, rows)
-            if self.shadow is not None:
+            if self.shadow is not None and self.failure is None:
                 self._follow(tb, sel)
         self.wall_time += clock.wall
         self.compile_time += clock.compile
         self.cur[rows] = c0
         self.rate[rows] = r0
         self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
+        if self.failure is not None:
+            return slice(out.start, self.row)  # (the samples before the failure)
         self.apply_scene_commands()
         return out
 
@@ -299,8 +306,44 @@ class Runner:
                                  exact=free and sim._free_axis != -1, stiff=h > sim.tau_min)
         self._steps_seen = sim.steps
 
+    def _check_samples(self, sel: np.ndarray, r: slice) -> int:
+        """How many of the new output samples (times ``sel``, buffer rows ``r``) hold a sound state: finite (L, the
+        attitude where it is integrated, the eddy modes and effects' states, the torque) with |L| within
+        :attr:`L_sound` (:func:`gyro_sim.scenes.limits.L_limit`: what the fields can drive; the kinetic energy is at
+        most |L|²/(2 J_min)). At the first that does not, the run fails: :attr:`failure` says what and when, the
+        output ends with the sample before (:attr:`row`) and :attr:`done` is True."""
+        y = self.out_y[r]
+        ok = np.isfinite(y[:, 0:3]).all(axis=1) & np.isfinite(y[:, 7:]).all(axis=1) & \
+            np.isfinite(self.out_N[r]).all(axis=1)
+        if self.sim.attitude:
+            ok &= np.isfinite(y[:, 3:7]).all(axis=1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            Ln = np.linalg.norm(y[:, 0:3], axis=1)
+        big = ok & (Ln > self.L_sound)
+        bad = np.flatnonzero(~ok | big)
+        if not bad.size:
+            return sel.size
+        i = int(bad[0])
+        if big[i]:
+            what = (f"|L| = {Ln[i]:.3g} N m s, beyond the {self.L_sound:.3g} N m s the fields can drive "
+                    f"(scenes/limits.py L_limit)")
+        else:
+            parts = [name for name, cols in (("L", y[i, 0:3]), ("the attitude", y[i, 3:7] if self.sim.attitude
+                                                                 else np.zeros(1)),
+                                             ("the eddy modes / effects", y[i, 7:]), ("the torque", self.out_N[r][i]))
+                     if not np.isfinite(cols).all()]
+            what = f"the state is not finite ({', '.join(parts)})"
+        self.failure = f"failed: {what} at t = {float(sel[i]):.9g} s"
+        self.row = self._base + r.start + i
+        return i
+
     def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
-        """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate)."""
+        """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate),
+        after checking them (:meth:`_check_samples`: a broken state ends the run)."""
+        if not sel.size:
+            return
+        n = self._check_samples(sel, slice(rows.start, rows.start + sel.size))
+        sel = sel[:n]
         if not sel.size:
             return
         r = slice(rows.start, rows.start + sel.size)
@@ -472,7 +515,9 @@ class Runner:
                          modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
                          compile_time=self.compile_time,
                          steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
-                         attitude=self.sim.attitude, error_estimate=self.error_estimate())
+                         attitude=self.sim.attitude,
+                         error_estimate=None if self.failure is not None else self.error_estimate(),
+                         failure=self.failure)
 
 
 def _changes(sim: Simulator, commands: dict) -> bool:

@@ -17,6 +17,7 @@ from gyro_sim.physics.frames import euler_angles, quat_to_matrix
 from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan,
                                       field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
+from gyro_sim.scenes.limits import command_problem, stator_limits
 from gyro_sim.scenes.scene import Scene
 from gyro_sim.scenes.tolerance import has_symmetry_axis
 
@@ -106,6 +107,8 @@ class Simulator:
         self.current = np.array([s.current for s in st], dtype=float)
         self.rate = np.array([s.rate for s in st], dtype=float)
         self.phase = np.array([s.phase for s in st], dtype=float)
+        # each stator's largest current (A) and |field rate| (rad/s): a command beyond is refused (scenes/limits.py)
+        self.max_current, self.max_rate = stator_limits(scene)
         # --- general field B(t) = Re Σ B_p exp(−i ω_p t)
         self.field_B = np.array([np.array(f.real) + 1j * np.array(f.imag) for f in scene.field]).reshape(-1, 3)
         self.field_om = np.array([f.frequency for f in scene.field], dtype=float)
@@ -214,15 +217,16 @@ class Simulator:
     def set_stators(self, commands: dict) -> None:
         """Command several stators at once, ``{stator: (current A | None, rate rad/s | None)}`` (a stator by name
         or index): one field step for all the current changes (the result does not depend on the order the
-        stators are named in)."""
+        stators are named in). A current or rate that is not finite, a negative current, or one beyond the stator's
+        ``max_current`` / ``max_rate`` (:mod:`gyro_sim.scenes.limits`) is refused with one ValueError naming the
+        stator, the value and the limit, before anything changes."""
         n = len(self.stator_names)
         if not all(type(k) is int and 0 <= k < n for k in commands):  # (the Runner's: indices in range already)
             commands = {self.stator_index(k): c for k, c in commands.items()}
         for k, (current, rate) in commands.items():
-            if current is not None and not (math.isfinite(current) and current >= 0):
-                raise ValueError(f"stator {self.stator_names[k]!r}: current = {current}: must be finite and ≥ 0 A")
-            if rate is not None and not math.isfinite(rate):
-                raise ValueError(f"stator {self.stator_names[k]!r}: rate = {rate}: must be finite (rad/s)")
+            why = command_problem(self, k, current, rate)
+            if why:
+                raise ValueError(why)
         changed = {k: c for k, (c, _) in commands.items() if c is not None and c != self.current[k]}
         if changed:
             before = self.field_now()

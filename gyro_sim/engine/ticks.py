@@ -289,7 +289,7 @@ class TickLoop:
                 r.sim._tune_call(time.perf_counter() - w0, r.sim.call_steps)
             nb = r._bi - i0
             common = bk[:nb][self._common[i0:i0 + nb]]
-            if r.shadow is not None and common.size and not r._lazy:
+            if r.shadow is not None and common.size and not r._lazy and r.failure is None:
                 self._follow(common)
         r.wall_time += clock.wall
         r.compile_time += clock.compile
@@ -341,6 +341,7 @@ class TickLoop:
         rows = slice(row0, s_hi)
         r.row, r._bi = s_hi, i0 + nb
         r._accumulate(r.t_out[row0:s_hi], r._buf(rows))
+        rows = slice(row0, r.row)  # (a run that failed ends at its last sound sample: Runner._check_samples)
         return bk, law_at, rows, n_log, log_c, log_r
 
     def _follow(self, common: np.ndarray) -> None:

@@ -132,7 +132,8 @@ class BagRecorder:
 
     Leaving the ``with`` block, normally or by an exception (KeyboardInterrupt included),
     closes the bag: everything written so far is in a complete, indexed file; custom_data
-    ``gyro_sim.end`` says ``complete`` or ``interrupted: <exception>`` and ``gyro_sim.duration`` the time of the
+    ``gyro_sim.end`` says ``complete``, ``interrupted: <exception>`` or ``failed: <what> at t = … s`` (the run's
+    state broke: :meth:`run_failed`) and ``gyro_sim.duration`` the time of the
     last state sample written (s). The scene message is logged at the time of the first message written (t = 0
     if none). Thread-safe.
 
@@ -437,6 +438,11 @@ class BagRecorder:
     def interrupted(self, reason: str) -> None:
         """Mark the run as ended early (custom_data ``gyro_sim.end`` = ``interrupted: <reason>``)."""
         self._end = f"interrupted: {reason}"
+
+    def run_failed(self, failure: str) -> None:
+        """Mark the run as failed: its state broke (custom_data ``gyro_sim.end`` = ``failure``, the Runner's
+        ``failed: <what> at t = … s``; the bag holds the samples before it)."""
+        self._end = failure
 
     @property
     def failed(self) -> Optional[str]:

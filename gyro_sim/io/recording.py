@@ -17,7 +17,7 @@ The scene and the package version are stored twice:
 * in the rosbag2 ``custom_data`` (``metadata.yaml``, and the same YAML inside the MCAP file's
   ``rosbag2`` metadata record that ``ros2 bag`` reads): keys ``gyro_sim.version``,
   ``gyro_sim.scene_name``, ``gyro_sim.scene`` (the scene file text), ``gyro_sim.end``
-  (``complete`` or ``interrupted: <exception>``) and any ``extra`` keys;
+  (``complete``, ``interrupted: <exception>`` or ``failed: <what> at t = … s``) and any ``extra`` keys;
 * as one latched message on ``/gyro/scene`` (std_msgs/String, transient_local depth 1), so a
   player or Foxglove that ignores custom_data still gets the scene.
 
@@ -236,15 +236,19 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
 
         try:
             drive(r, take, release=True)
-            order.finish(r.take_commands(), r.T)
+            order.finish(r.take_commands(), r.T if r.failure is None else r.sim.t)
         finally:
             if not rec.closed:
                 rec.set_custom("gyro_sim.steps", int(r.sim.steps))
                 rec.set_custom("gyro_sim.wall_time", float(r.wall_time))
                 rec.set_custom("gyro_sim.compile_time", float(r.compile_time))
-                rec.set_custom("gyro_sim.error_estimate", r.error_estimate().to_json())
+                if r.failure is not None:  # (no error estimate of a failed run: its end says what broke)
+                    rec.run_failed(r.failure)
+                else:
+                    rec.set_custom("gyro_sim.error_estimate", r.error_estimate().to_json())
     known = dict(scene=scene, stator_names=names, wall_time=r.wall_time, compile_time=r.compile_time,
-                 steps=r.sim.steps, attitude=True, error_estimate=r.error_estimate())
+                 steps=r.sim.steps, attitude=True, failure=r.failure,
+                 error_estimate=None if r.failure is not None else r.error_estimate())
     if kept.rows is not None:
         return _RunResult(**known, **kept.rows.series(), commands=kept.commands)
     preview = _RunResult(**known, **kept.preview.series(kept.last))

@@ -139,13 +139,15 @@ def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Opti
     grid = _grid(scene, data, duration, control_period)
     t = np.array([grid.get(ns, ns / 1e9) for ns in data.t_ns.tolist()], dtype=float)
     est = parse_error_estimate(custom.get("gyro_sim.error_estimate"))
+    end = str(custom.get("gyro_sim.end") or "")  # (a run whose state broke: "failed: <what> at t = … s")
     return RunResult(scene=scene, t=t, L=data.L, q=data.q, omega_b=data.omega_b, torque=data.torque,
                      energy=kinetic_energy(scene.inertia, data.omega_b), stator_names=list(data.stator_names),
                      current=data.current, field_rate=data.rate, field_phase=data.phase, modes=np.zeros((t.size, 0)),
                      wall_time=_custom_float(custom, "gyro_sim.wall_time") or 0.0,
                      compile_time=_custom_float(custom, "gyro_sim.compile_time") or 0.0,
                      steps=int(_custom_float(custom, "gyro_sim.steps") or 0), commands=bag_commands(data, grid),
-                     effects=_bag_effects(data), attitude=True, error_estimate=est)
+                     effects=_bag_effects(data), attitude=True, error_estimate=est,
+                     failure=end if end.startswith("failed:") else None)
 
 
 #: the name gyro_sim.testing has used (the pytest kit's BenchRun.result)

@@ -14,6 +14,7 @@ from typing import Callable, Iterable, Optional
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from gyro_sim.io.messages import QOS, stamp_ns
+from gyro_sim.scenes.limits import real_value
 from gyro_sim.scenes.scene_text import clip, preview
 from gyro_sim.ros.launch import PARENT_PID_ENV, STOP_SIGNALS, signal_name  # (launch.py: no rclpy)
 
@@ -64,7 +65,7 @@ def msg_time(header) -> float:
 MAX_REASON = 240
 
 
-def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
+def parse_command(msg, stators: list, limits: Optional[tuple] = None) -> tuple[Optional[tuple], str]:
     """Check a /gyro/stator_commands JointState; ((names, currents, rates|None, stamp_ns), '') or (None, reason).
 
     name: known stators (texts), no repeats; effort (current, A): one finite value ≥ 0 per name;
@@ -73,9 +74,11 @@ def parse_command(msg, stators: list) -> tuple[Optional[tuple], str]:
     booleans). The reason is one line of at most :data:`MAX_REASON` characters quoting values by
     :func:`gyro_sim.scene_text.preview`; a message with more names or values than there are stators is
     refused on its lengths alone (its cost is bounded by the number of stators, not by the message).
+    ``limits``: (largest currents A, largest |rates| rad/s), one each per stator of ``stators`` (the scene's
+    ``max_current`` / ``max_rate``, :mod:`gyro_sim.scenes.limits`): a value beyond is refused naming it and its limit.
     """
     stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-    why = _command_problem(msg, list(stators))
+    why = _command_problem(msg, list(stators), limits)
     if why:
         return None, clip(why, MAX_REASON)
     names = list(msg.name)
@@ -90,7 +93,7 @@ def _is_real(x) -> bool:
     return isinstance(x, numbers.Real) and not isinstance(x, bool)
 
 
-def _command_problem(msg, stators: list) -> str:
+def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
     """'' if the command ``msg`` is valid for ``stators`` (see :func:`parse_command`), else the reason."""
     n, n_cur, n_rate = len(msg.name), len(msg.effort), len(msg.velocity)
     if n == 0:
@@ -114,14 +117,26 @@ def _command_problem(msg, stators: list) -> str:
     if n_cur != n:
         return f"effort = {preview(list(msg.effort[:8]))}: one current (A) per name expected ({n} names, {n_cur} values)"
     for name, c in zip(names, msg.effort):
-        if not (_is_real(c) and math.isfinite(c) and c >= 0):
+        if not (_is_real(c) and math.isfinite(real_value(c)) and c >= 0):
             return f"effort[{name}] = {preview(c)}: current must be finite and ≥ 0 A"
     if n_rate and n_rate != n:
         return (f"velocity = {preview(list(msg.velocity[:8]))}: empty or one rate (rad/s) per name expected "
                 f"({n} names, {n_rate} values)")
     for name, r in zip(names, msg.velocity):
-        if not (_is_real(r) and math.isfinite(r)):
+        if not (_is_real(r) and math.isfinite(real_value(r))):
             return f"velocity[{name}] = {preview(r)}: field rate must be finite (rad/s)"
+    if limits is not None:
+        index = {n: k for k, n in enumerate(stators)}
+        for name, c in zip(names, msg.effort, strict=True):
+            lim = float(limits[0][index[name]])
+            if c > lim:
+                return (f"effort[{name}] = {float(c):.6g}: beyond {lim:.6g} A, the largest current of stator "
+                        f"{name!r} (its max_current in the scene)")
+        for name, r in zip(names, msg.velocity if n_rate else [0.0] * n, strict=True):  # (empty: unchanged)
+            lim = float(limits[1][index[name]])
+            if abs(r) > lim:
+                return (f"velocity[{name}] = {float(r):.6g}: beyond {lim:.6g} rad/s, the largest field rate of stator "
+                        f"{name!r} (its max_rate in the scene)")
     return ""
 
 

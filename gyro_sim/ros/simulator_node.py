@@ -25,8 +25,12 @@ commands come back. A malformed or out-of-range command is refused whole, with t
 Signals and exit status (:func:`gyro_sim.ros.common.node_main`): SIGINT or SIGTERM ends the run at the loop's next
 turn: the ``done:`` line says ``(interrupted)``, the bag is closed, readable, with custom data
 ``gyro_sim.end`` = ``interrupted: signal SIGINT`` (or ``SIGTERM``), and the node exits 130 (SIGINT) or 143
-(SIGTERM); a second signal meanwhile changes nothing. 0: the run reached its duration. 2: a refused scene or
-parameter (one ``simulator: error:`` line). A SIGKILL leaves an unfinished bag (no index or metadata).
+(SIGTERM); a second signal meanwhile changes nothing. 0: the run reached its duration. 1: the run failed (its
+state broke: not finite, or |L| beyond what the fields can drive, :attr:`Runner.failure`): it stops there, and the
+status topic, the ``done:`` line (no error estimate) and the bag's ``gyro_sim.end`` say ``failed: <what> at t = …``.
+2: a refused scene or parameter (one ``simulator: error:`` line). A command beyond a stator's ``max_current`` /
+``max_rate`` (gyro_sim/scenes/limits.py) is refused like any malformed one: state unchanged, a rate-limited
+``refused command:`` status. A SIGKILL leaves an unfinished bag (no index or metadata).
 """
 from __future__ import annotations
 
@@ -44,7 +48,7 @@ import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
-from gyro_sim.io.messages import (DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
+from gyro_sim.io.messages import (DIAG_ERROR, DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
                         TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS,
                         TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, diagnostics_message, effects_message,
                         node_topic, scene_message, stamp_ns, state_messages, status_message, to_ros)
@@ -383,6 +387,8 @@ class Loop:
         if self.waiting_since is not None and time.perf_counter() - self.waiting_since > 1.0:
             return DIAG_WARN, (f"waiting {time.perf_counter() - self.waiting_since:.1f} s for the command stamped "
                                f"{t:.9f} s")
+        if self.runner.failure is not None:
+            return DIAG_ERROR, self.runner.failure
         if self.runner.done:
             return DIAG_OK, f"done at t = {t:.9g} s"
         if self.node.control.paused and self.node.control.steps_left == 0:
@@ -420,7 +426,8 @@ class Loop:
         published since the previous tick are dropped quietly (a controller may answer every sample, and a state
         published again gets a second answer); any other stamp is refused and reported, and feeds no watchdog.
         """
-        cmd, why = parse_command(msg, self.names)
+        sim = self.runner.sim
+        cmd, why = parse_command(msg, self.names, (sim.max_current, sim.max_rate))
         if cmd is None:
             # one report a second per kind of refusal, whatever finite values are in it (a sender of changing bad
             # values must not flood the status topic either); NaN and inf stay kinds of their own
@@ -516,7 +523,11 @@ class Loop:
 
     def apply(self, cmd) -> None:
         nm, cur, rate, _ = cmd
-        self.runner.apply_commands({n: (cur[i], rate[i] if rate is not None else None) for i, n in enumerate(nm)})
+        try:
+            self.runner.apply_commands({n: (cur[i], rate[i] if rate is not None else None) for i, n in enumerate(nm)})
+        except ValueError as exc:  # (a command the fault injection scaled beyond a stator's limit: nothing changed)
+            self.report_refusal("applied", str(exc), time.perf_counter())
+            return
         if self.recorder is not None and nm:
             self.recorder.write_command(self.runner.sim.t, nm, cur, rate)
 
@@ -679,8 +690,9 @@ class Loop:
 
     def finish(self) -> int:
         r, node = self.runner, self.node
-        # decided once (the bag, the done line and the exit status agree); a run that reached its end is complete
-        status = 0 if r.done else exit_status(self.stop)
+        # decided once (the bag, the done line and the exit status agree); a run that reached its end is complete, one
+        # whose state broke failed (status 1: Runner.failure)
+        status = (1 if r.failure is not None else 0) if r.done else exit_status(self.stop)
         wall = self.run_wall()
         compiled = compile_seconds() - self.c0
         lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
@@ -690,10 +702,15 @@ class Loop:
                          ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
                          ("latency_p99_s", float(np.percentile(lat, 99))), ("latency_max_s", float(np.max(lat)))):
                 self.recorder.set_custom(f"gyro_sim.{k}", v)
-            self.recorder.set_custom("gyro_sim.error_estimate", est.to_json())
-            if status:
+            if r.failure is not None:  # (no error estimate of a failed run: its end says what broke)
+                self.recorder.run_failed(r.failure)
+            else:
+                self.recorder.set_custom("gyro_sim.error_estimate", est.to_json())
+            if status and r.failure is None:
                 signum = getattr(self.stop, "signum", None)
                 self.recorder.interrupted(f"signal {signal_name(signum)}" if signum else "stopped")
+        if r.failure is not None:
+            self.status(r.failure, warn=True)
         self.diagnostics(force=True)
         if self.p["progress"]:
             self.show_progress(end=True)
@@ -702,9 +719,9 @@ class Loop:
                     f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
                     f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms max {np.max(lat) * 1e3:.3f} ms"
                     + (f" (+ {compiled:.1f} s compiling the kernels, first use)" if compiled else "")
-                    + f", estimated error {est.text()}"
-                    + (" (interrupted)" if status else ""))
-        return status  # 0 complete; 130 / 143 stopped by SIGINT / SIGTERM (the bag is closed)
+                    + (f", {r.failure}" if r.failure is not None else f", estimated error {est.text()}")
+                    + (" (interrupted)" if status and r.failure is None else ""))
+        return status  # 0 complete; 1 failed; 130 / 143 stopped by SIGINT / SIGTERM (the bag is closed)
 
 
 def _scene_text(scene) -> str:

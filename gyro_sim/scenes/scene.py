@@ -17,6 +17,7 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     description: one line
     rotor:
       inertia: [J1, J2, J3]          # principal moments, kg·m², x3 = polar axis
+      max_inertia_ratio: null        # largest J_max/J_min (default 1e4)
       conductor:                     # omit for a non-conducting rotor
         kind: thin_shell             # thin_shell | solid_sphere | shell
         outer_radius: 0.025          # r2, m
@@ -43,6 +44,10 @@ Format (all keys but ``rotor``, ``duration`` optional)::
         current: 1.0                 # I_k, A (amplitude, ≥ 0)
         rate: 3141.59                # ν_k = dσ_k/dt, rad/s; the sign is the direction
         phase: 0.0                   # σ_k at t = 0, rad
+        max_current: null            # largest current, A (commands, laws, the scene's own values; default:
+                                     # 10 x the scene's largest field b·I, at least 0.1 T, over b_k; see Limits)
+        max_rate: null               # largest |field rate|, rad/s (default: 10 x the scene's fastest rate, at
+                                     # least 1e4 rad/s)
     field:                           # general uniform field B(t) = Re Σ B_p exp(−i ω_p t)
       - real: [0, 0, 1.0e-3]         # Re B_p, T
         imag: [0, 0, 0]              # Im B_p, T
@@ -85,6 +90,11 @@ Format (all keys but ``rotor``, ``duration`` optional)::
     effects: {}                      # unbalance, gas_drag, magnetizable, flywheel, damper
                                      # (gyro_sim/effect_config.py; all off by default)
 
+Physical limits (gyro_sim/scenes/limits.py): every field amplitude b_k I_k and field term at most 100 T, every
+rate and the initial body rate at most 1e7 rad/s, J_max/J_min at most ``max_inertia_ratio``; commands (in-process,
+over ROS, the laws' parameters) within each stator's ``max_current`` and ``max_rate``. A value beyond is refused in
+one line naming the key, the value and the limit.
+
 Fields are switched on at t = 0 on a rotor free of eddy currents.
 
 The stator triad: e1k is the next case axis after u_k in cyclic order (z1→z2→z3→z1),
@@ -105,6 +115,7 @@ from gyro_ctl.config import ControllerConfig, unknown_stators
 from gyro_ctl.numbers import Finite, NonNegative, Positive, count, real
 
 from gyro_sim.scenes.effect_config import Effects, unit_vector
+from gyro_sim.scenes.limits import check_scene_limits
 from gyro_sim.scenes.tolerance import DEFAULT_ATTITUDE, DEFAULT_PHASE, DEFAULT_RTOL
 from gyro_sim.scenes.scene_text import SceneError, clip, human_bytes, parse_scene_text, preview, read_scene_file
 
@@ -156,6 +167,7 @@ class Rotor(_Strict):
     inertia: Annotated[list[real(ge=1e-15, le=1e6)],
                        Field(min_length=3, max_length=3)]  # kg·m²
     conductor: Optional[Conductor] = None
+    max_inertia_ratio: Optional[Positive] = None  # largest J_max/J_min (default: limits.MAX_INERTIA_RATIO)
 
     @field_validator("inertia")
     @classmethod
@@ -177,6 +189,8 @@ class Stator(_Strict):
     current: NonNegative = 0.0
     rate: Finite = 0.0
     phase: Finite = 0.0
+    max_current: Optional[NonNegative] = None  # A; default: derived from the scene (gyro_sim/scenes/limits.py)
+    max_rate: Optional[NonNegative] = None  # rad/s; default: derived from the scene
 
     @field_validator("axis")
     @classmethod
@@ -389,6 +403,7 @@ class Scene(_Strict):
                 f"integrator.method = 'qs_flow' integrates the quasi-static torque ([K] (1.2)); torque_model = "
                 f"{self.torque_model!r}: use torque_model: quasi_static, or frozen_flow, lawson8, etdrk4 or auto"
             )
+        check_scene_limits(self)  # (before the accuracy plan and the result size compute with the values)
         self.output.check_windows(self.duration)
         check_result_size(self)
         if (self.stators or self.field) and self.torque_model != "none" and self.rotor.conductor is None:
