@@ -154,7 +154,7 @@ def headline(res) -> list[str]:
     out.append(f"cost: CPU per simulated second from 20 s on within {linearity(cost):.2f}x")
     ratios = scene_ratios(cost)
     if ratios:
-        worst = max(ratios, key=ratios.get)
+        worst = max(ratios, key=lambda n: ratios[n])
         met = sum(1 for r in cost.scene_rows if r.what == "as shipped" and r.met)
         out.append(f"cost: built-in scenes as shipped against the old defaults: {ratios[worst]:.2f}x at most "
                    f"({worst}); {met} of {len(ratios)} meet their accuracy by their own estimate")
