@@ -422,6 +422,11 @@ class BagRecorder:
         """Mark the run as ended early (custom_data ``gyro_sim.end`` = ``interrupted: <reason>``)."""
         self._end = f"interrupted: {reason}"
 
+    def mark_failed(self, what: str) -> None:
+        """Mark the run as failed (custom_data ``gyro_sim.end`` = ``failed: <what>``, e.g. ``failed: controller lost
+        at t = 1.2 s``): it ended early for a reason that is no signal."""
+        self._end = f"failed: {what}"
+
     @property
     def failed(self) -> Optional[str]:
         """The one-line description of a failed write (the bag was closed with what fit), else None."""
