@@ -259,6 +259,8 @@ def _run_ros(args, scene, name) -> int:
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
+    if code == 1 and Path(bag).exists():  # a failed run (e.g. its controller lost): its bag says so, summarised
+        stopped_by = "the run failed"
     if stopped_by is None:
         return _error(f"the simulator node ended with status {code}"
                       + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))

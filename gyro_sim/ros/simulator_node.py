@@ -205,7 +205,10 @@ class SimulatorNode(Node):
         self.t_now = 0.0  # simulation time, for the service replies (set by the loop)
         self.latencies: deque = deque(maxlen=LATENCY_WINDOW)  # s; the done line's figures are over these
         self.published_wall: dict[int, float] = {}
-        self.published_n: dict[int, int] = {}  # stamp (ns) -> publications of that state not yet answered
+        #: stamp (ns) -> publications of that state to a subscriber, less the answers to it so far: lockstep drops an
+        #: answer to a state since the previous tick quietly while this is > 0, refuses it after (a second answer
+        #: to a state published once is a wrong stamp: e.g. a controller stamping every answer 0)
+        self.published_n: dict[int, int] = {}
 
     # --- parameters --------------------------------------------------------------------------
     def _declare(self, name, default, description, rng=None, read_only=False):
@@ -306,7 +309,8 @@ class SimulatorNode(Node):
                     if msgs.get(topic) is not None:
                         self.publish(topic, msgs[topic])
             self.published_wall[ns] = now
-            self.published_n[ns] = self.published_n.get(ns, 0) + 1
+            if topics:  # (published to no one: no answer to expect)
+                self.published_n[ns] = self.published_n.get(ns, 0) + 1
         if len(self.published_n) > PUBLISHED_KEPT:  # states no one answered (no controller, or a dead one)
             for k in sorted(self.published_n)[:-PUBLISHED_KEPT // 10]:
                 del self.published_n[k]
