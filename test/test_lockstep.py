@@ -15,17 +15,15 @@ from gyro_sim.recording import bag_info, read_bag  # noqa: E402
 from test_ros import PROBE, PROBE_WINDOW, closed_loop, finish, ros  # noqa: E402,F401  (ros: the fixture)
 
 pytestmark = pytest.mark.ros
-HOG = ["sh", "-c", "while :; do :; done"]
 
 
 @pytest.fixture
 def hogs():
     """Two CPU-burning processes (one per core of the 2-core CI machine) for the test's duration."""
-    procs = [subprocess.Popen(HOG) for _ in range(2)]
-    yield procs
-    for p in procs:
-        p.kill()
-        p.wait()
+    from gyro_sim.apps.bench_ros import cpu_hogs
+
+    with cpu_hogs(2) as procs:
+        yield procs
 
 
 @pytest.mark.parametrize("scene,duration", [("spinup_thin_shell", 2.0), ("nutation_oblate", 0.3)])
