@@ -10,7 +10,6 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
 
-import gyro_sim  # noqa: E402
 from gyro_sim.recording import bag_info, read_bag  # noqa: E402
 from test_ros import PROBE, PROBE_WINDOW, closed_loop, finish, ros  # noqa: E402,F401  (ros: the fixture)
 
@@ -94,7 +93,8 @@ def test_a_controller_answering_stamp_zero_is_refused_at_once(ros, tmp_path):
     ros.start(PROBE, "stamp_zero", "/", str(PROBE_WINDOW))
     code, out = finish(sim)
     b = read_bag(bag)
-    warn = [(t, s) for t, s in zip(b.status_t, b.status) if s.startswith(("refused", "controller lost", "watchdog"))]
+    warn = [(t, s) for t, s in zip(b.status_t, b.status, strict=True)
+            if s.startswith(("refused", "controller lost", "watchdog"))]
     print("\n  " + "\n  ".join(f"t = {t:.3f} s: {s[:110]}" for t, s in warn[:3]))
     assert warn and warn[0][1].startswith("refused command: stamp = 0.000000000 s: lockstep waits for the command "
                                           "stamped 0.001000000 s"), warn

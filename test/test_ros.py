@@ -205,7 +205,7 @@ def test_a_killed_controller_with_currents_off_lets_the_run_go_on(ros, tmp_path)
     assert code == 0, out_text
     finish(p2)
     b = read_bag(bag)
-    wd = [(t, s) for t, s in zip(b.status_t, b.status) if s.startswith("controller lost")]
+    wd = [(t, s) for t, s in zip(b.status_t, b.status, strict=True) if s.startswith("controller lost")]
     assert wd and "currents_off" in wd[0][1], b.status
     t_fire = wd[0][0]
     after = b.t > t_fire + 1e-9

@@ -9,7 +9,8 @@ of a law not in force is refused with the reason. The parameters always show wha
 
 The node ends after the simulator's final status (``done:`` on ``gyro/status``, once it has answered a state of
 that run) with exit status 0, unless ``keep_alive`` is true; SIGINT or SIGTERM ends it cleanly (its last commands
-flushed) with exit status 130 or 143 (:func:`gyro_sim.ros.common.node_main`); 2: a refused scene or parameter (one ``controller: error:`` line).
+flushed) with exit status 130 or 143 (:func:`gyro_sim.ros.common.node_main`); 2: a refused scene or parameter (one
+``controller: error:`` line).
 """
 from __future__ import annotations
 

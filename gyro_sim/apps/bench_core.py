@@ -459,7 +459,8 @@ class BenchConfig:
     startup: bool = False  # the startup part (bench_scaling): new processes' import and first-run times
     startup_baseline: Optional[str] = None  # a source tree of the code before, timed beside this one
     sweep: bool = False  # the sweep part (bench_scaling): runs/s in-process, on 1 and 2 Dask workers
-    only: Optional[str] = None  # run this part alone ("accuracy", "cost", "estimate", "ticks", "startup", "sweep", "ros")
+    #: run this part alone ("accuracy", "cost", "estimate", "ticks", "startup", "sweep", "ros")
+    only: Optional[str] = None
     min_wall: float = 0.2  # repeat our (short) runs until this much wall time; keep the least
     max_reps: int = 5
 

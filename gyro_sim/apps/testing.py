@@ -624,7 +624,7 @@ class GyroBench:
             raise ControllerError(f"the controller process ended with an error while the simulator ran ({line}).\n"
                                   f"{self._controllers()}", "exited", line, run)
         start = _start_figures(next((x for x in run.status if x.startswith("simulator:")), "")) if run else {}
-        if start.get("controller_expected") and not _answered(run):
+        if run is not None and start.get("controller_expected") and not _answered(run):
             line = (next((x for x in run.status if x.startswith("refused command: stamp")), None)
                     or next((x for x in run.status if x.startswith(SILENCE_LINES)), None))
             stamps = line is not None and line.startswith("refused command: stamp")
