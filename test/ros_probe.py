@@ -15,6 +15,8 @@
                                                                    kinetic_moment state with its stamp (empty
                                                                    command before T_ON, STATOR at CURRENT A from
                                                                    it) and send one malformed command first
+    python ros_probe.py stamp_zero NS SECONDS                      answer every kinetic_moment state with an
+                                                                   empty command stamped 0 (right at t = 0 only)
     python ros_probe.py stamped NS SECONDS PERIOD                  valid commands with wrong stamps (0 and the
                                                                    wall clock, alternately) every PERIOD s
     python ros_probe.py params OUT.json SECONDS NODE REQUESTS      wait (≤ SECONDS) for NODE's parameter
@@ -245,6 +247,21 @@ def answer(ns: str, seconds: float, stator: str, t_on: float, current: float) ->
     node.destroy_node()
 
 
+def stamp_zero(ns: str, seconds: float) -> None:
+    """A controller that answers every state, always with stamp 0 (a bug a user's controller may have)."""
+    node = Node("gyro_stamp_zero_probe", namespace=ns)
+    cls = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
+    pub = node.create_publisher(cls, node_topic(TOPIC_STATOR_COMMANDS), qos_profile(TOPIC_STATOR_COMMANDS))
+    done: list = []
+    _done_watch(node, done)
+    node.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT),
+                             lambda m: pub.publish(cls()), _deep(TOPIC_KINETIC_MOMENT))
+    end = time.time() + seconds
+    while time.time() < end and not done:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    node.destroy_node()
+
+
 def stamped(ns: str, seconds: float, period: float) -> None:
     """Valid commands with stamps of no pending tick (0 and the wall clock, alternately) until the run is done."""
     node = Node("gyro_stamp_probe", namespace=ns)
@@ -319,6 +336,8 @@ if __name__ == "__main__":
             script(a[0], a[1], float(a[2]), json.loads(a[3]))
         elif cmd == "answer":
             answer(a[0], float(a[1]), a[2], float(a[3]), float(a[4]))
+        elif cmd == "stamp_zero":
+            stamp_zero(a[0], float(a[1]))
         elif cmd == "stamped":
             stamped(a[0], float(a[1]), float(a[2]))
         elif cmd == "params":

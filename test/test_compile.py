@@ -99,3 +99,32 @@ def test_read_only_install_falls_back_to_the_user_cache_and_compiles_once(tmp_pa
     print(f"\n  read-only install: {len(cached)} kernel index files in {sorted({str(p.parent) for p in cached})[:1]}")
     assert "compiling the numba kernels" in runs[0].stderr and "compiling" not in runs[1].stderr
     assert cached
+
+
+NO_NEW_KERNEL = """
+import sys, numba, gyro_sim
+from gyro_sim.engine.warmup import currents_off, warm
+from gyro_sim.scenes.scene import load_scene
+
+def loaded():
+    # every numba kernel of gyro_sim's modules with the signatures this process has compiled or loaded
+    return {(m, k): len(v.overloads) for m, mod in list(sys.modules.items()) if m.startswith("gyro_sim")
+            for k, v in vars(mod).items() if isinstance(v, numba.core.registry.CPUDispatcher)}
+
+warm(["nutation_oblate"], say=lambda text: None)
+before = loaded()
+currents_off(load_scene("nutation_oblate"), 0.3)  # (what the node does at t = 0.3 s of a run: not only 0.05)
+after = loaded()
+print(sorted(k[1] for k in after if after[k] > before.get(k, 0)))
+"""
+
+
+def test_warmup_covers_the_currents_off_path():
+    """After ``gyro-sim warmup`` a lost controller's zeroing (or the watchdog's) loads no new kernel mid-run: the
+    torque-free integrator it switches to is among what warmup runs (before: integrate_free compiled mid-run, 42 to
+    58 s under load, issue 30). In a process of its own (the suite's other tests load other kernels)."""
+    out = subprocess.run([sys.executable, "-c", NO_NEW_KERNEL], capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    new = json.loads(out.stdout.splitlines()[-1].replace("'", '"'))
+    print(f"\n  kernels first loaded by the zeroed run after warmup: {new}")
+    assert new == []

@@ -213,6 +213,16 @@ def test_info_of_a_run_cut_short_and_of_other_keys():
     assert d["something new"] == "x"
 
 
+def test_info_prints_readable_numbers():
+    """A ROS run's figures (issue 30: 'control ticks per s 72.60114958780215'): 4 significant digits, times below
+    1 s in ms with their unit, integers and texts as they are."""
+    d = dict(cli._info_rows(bag_info(control_ticks_per_s="72.60114958780215", latency_median_s="0.000412345",
+                                     latency_max_s="1.5", controller_lost="t = 0.1 s: its process ended (stop)")))
+    assert d["control ticks per s"] == "72.6"
+    assert d["latency median"] == "0.412 ms" and d["latency max"] == "1.5 s"
+    assert d["controller lost"] == "t = 0.1 s: its process ended (stop)"
+
+
 def test_info_of_a_recorded_bag(tmp_path, capsys):
     import gyro_sim
     from gyro_sim.recording import record_run

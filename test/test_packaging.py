@@ -207,8 +207,10 @@ def test_launch_file(launch_stubs):
 
     args = {e.args[0]: e.kwargs["default_value"] for e in entities if type(e) is s.launch_actions.DeclareLaunchArgument}
     sim = params_file("gyro_simulator")
+    share = s.launch_ros_substitutions.FindPackageShare("gyro_sim")
+    sim_file = s.launch_substitutions.PathJoinSubstitution([share, "config", "simulator.params.yaml"])
     assert args == {"scene": sim["scene"], "mode": sim["mode"], "namespace": "", "use_controller": "true",
-                    "record": ""}
+                    "record": "", "controller_params": "", "params_file": sim_file}
 
     # DDS on localhost unless the environment sets the range, before any node starts
     env = s.launch_actions.SetEnvironmentVariable(
@@ -216,20 +218,57 @@ def test_launch_file(launch_stubs):
         s.launch_substitutions.EnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE", default_value="LOCALHOST"))
     nodes = [e for e in entities if type(e) is Node]
     assert env in entities and entities.index(env) < entities.index(nodes[0])
-
-    assert [(n.kwargs["package"], n.kwargs["executable"], n.kwargs["name"]) for n in nodes] == \
-        [("gyro_sim", "simulator", "gyro_simulator"), ("gyro_ctl", "controller", "gyro_controller")]
     string = s.launch_ros_parameter_descriptions.ParameterValue
-    for node, file, overrides in ((nodes[0], "simulator.params.yaml", ("scene", "mode", "record")),
-                                  (nodes[1], "controller.params.yaml", ("scene",))):
-        assert node.kwargs["namespace"] == LC("namespace")
-        params_path, values = node.kwargs["parameters"]
-        assert params_path == s.launch_substitutions.PathJoinSubstitution(
-            [s.launch_ros_substitutions.FindPackageShare("gyro_sim"), "config", file])
-        assert (ROOT / "config" / file).is_file()
-        assert values == {k: string(LC(k), value_type=str) for k in overrides}
-    assert "condition" not in nodes[0].kwargs
-    assert nodes[1].kwargs["condition"] == s.launch_conditions.IfCondition(LC("use_controller"))
+    scene = {"scene": string(LC("scene"), value_type=str)}
+
+    # the simulator: its parameter file (params_file), scene, mode and record over it
+    (simulator,) = nodes
+    assert (simulator.kwargs["package"], simulator.kwargs["executable"], simulator.kwargs["name"]) == \
+        ("gyro_sim", "simulator", "gyro_simulator")
+    assert simulator.kwargs["namespace"] == LC("namespace") and "condition" not in simulator.kwargs
+    assert simulator.kwargs["parameters"] == [LC("params_file"), {k: string(LC(k), value_type=str)
+                                                                  for k in ("scene", "mode", "record")}]
+    assert (ROOT / "config" / "simulator.params.yaml").is_file()
+
+    # the controller (use_controller): the scene's own law unless controller_params names a file (before: always
+    # config/controller.params.yaml, psi_switching: scene:=spinup_thin_shell ran the wrong law)
+    (group,) = [e for e in entities if type(e) is s.launch_actions.GroupAction]
+    assert group.kwargs["condition"] == s.launch_conditions.IfCondition(LC("use_controller"))
+    own, given = group.kwargs["actions"]
+    for n in (own, given):
+        assert (n.kwargs["package"], n.kwargs["executable"], n.kwargs["name"]) == \
+            ("gyro_ctl", "controller", "gyro_controller")
+        assert n.kwargs["namespace"] == LC("namespace")
+    IfC, subs = s.launch_conditions.IfCondition, s.launch_substitutions
+    assert own.kwargs["parameters"] == [scene]
+    assert own.kwargs["condition"] == IfC(subs.EqualsSubstitution(LC("controller_params"), ""))
+    assert given.kwargs["parameters"] == [LC("controller_params"), scene]
+    assert given.kwargs["condition"] == IfC(subs.NotEqualsSubstitution(LC("controller_params"), ""))
+
+
+def test_launch_file_with_upstream_launch():
+    """The launch file under the real ros2/launch and launch_ros (pure Python; skipped where they are not
+    installed): scene:=spinup_thin_shell starts the controller with the scene alone (its own law, spinup), and
+    controller_params:=FILE starts it with that file."""
+    launch = pytest.importorskip("launch", reason="ros2/launch is not installed (a ROS 2 install has it)")
+    if not hasattr(launch, "LaunchContext"):
+        pytest.skip("the 'launch' module here is not ros2/launch")
+    pytest.importorskip("launch_ros", reason="ros2/launch_ros is not installed (a ROS 2 install has it)")
+    from launch.actions import GroupAction
+    from launch_ros.actions import Node
+
+    spec = importlib.util.spec_from_file_location("gyro_sim_launch_real", ROOT / "launch/gyro_sim.launch.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    for given, which in (("", 0), (str(ROOT / "config" / "controller.params.yaml"), 1)):
+        ctx = launch.LaunchContext()
+        for name, default, _ in mod.ARGUMENTS:
+            ctx.launch_configurations[name] = default
+        ctx.launch_configurations.update(scene="spinup_thin_shell", controller_params=given)
+        (group,) = [e for e in mod.generate_launch_description().entities if isinstance(e, GroupAction)]
+        assert group.condition.evaluate(ctx)
+        nodes = [e for e in group.get_sub_entities() if isinstance(e, Node)]  # (own law, the file's)
+        assert [n.condition.evaluate(ctx) for n in nodes] == [which == 0, which == 1]
 
 
 # --- colcon build ---------------------------------------------------------------------------------

@@ -138,13 +138,14 @@ def test_reset_is_refused_while_recording(ros, tmp_path):
     assert bag_info(tmp_path / "bag")["end_reason"] == "complete"
 
 
-def test_mis_stamped_commands_are_refused_and_the_watchdog_fires(ros, tmp_path):
+def test_mis_stamped_commands_are_refused_and_the_controller_counts_as_lost(ros, tmp_path):
     """Lockstep with commands stamped for no pending tick (0 and the wall clock, as `ros2 topic pub` sends): each
-    kind refused with a status line naming the stamp lockstep waits for; they do not feed the watchdog, which
-    fires, so the run goes on to its end (before: it stalled, '0 commands refused')."""
+    kind refused with a status line naming the stamp lockstep waits for (the one stamped 0 answers t = 0); they do
+    not count as answers: the sender is lost after controller_timeout, and with on_controller_lost currents_off the
+    run goes on to its end (before: it stalled, '0 commands refused')."""
     bag = tmp_path / "stamp"
-    sim = ros.simulator(scene="nutation_oblate", duration=0.2, record=bag, watchdog_timeout=1.0,
-                        startup_timeout=120.0)
+    sim = ros.simulator(scene="nutation_oblate", duration=0.2, record=bag, on_controller_lost="currents_off",
+                        controller_timeout=1.0, startup_timeout=120.0)
     ros.start(PROBE, "stamped", "/", str(PROBE_WINDOW), "0.02")
     code, out = finish(sim)
     assert code == 0, out
@@ -153,7 +154,8 @@ def test_mis_stamped_commands_are_refused_and_the_watchdog_fires(ros, tmp_path):
     done = [s for s in b.status if s.startswith("done:")][-1]
     print("\n  " + (refusals[0] if refusals else "no refusal") + f"\n  {done[:120]}")
     assert refusals and "lockstep waits for the command stamped" in refusals[0]
-    assert any(s.startswith("watchdog: no command for 1 s") for s in b.status)
+    assert any(s.startswith("controller lost at t = 0.001 s: no answer for 1 s (controller_timeout)")
+               for s in b.status)
     n_refused = int(re.search(r"(\d+) commands refused", done).group(1))
     assert n_refused >= 1 and "(interrupted)" not in done
     assert b.t[-1] == pytest.approx(0.2)

@@ -248,7 +248,7 @@ def test_the_nodes_exit_128_plus_the_signal_even_when_it_is_repeated(procs, tmp_
     sim = procs.start([sys.executable, "-m", "gyro_sim.ros.simulator_node", "--ros-args", "-p",
                        "scene:=spinup_thin_shell", "-p", "duration:=600.0", "-p", f"record:={bag}"], sim_log, env=env)
     ctl = procs.start([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
-                       "scene:=spinup_thin_shell"], ctl_log, env=env)
+                       "scene:=spinup_thin_shell", "-p", "keep_alive:=true"], ctl_log, env=env)  # (not ended by done:)
     wait_for_text(sim_log, r"simulator: scene", sim)
     wait_for_text(ctl_log, r"controller: law", ctl)
     time.sleep(2.0)
@@ -383,12 +383,14 @@ def test_the_launch_file_gives_the_simulator_time_to_close_its_bag(launch_stubs)
     from gyro_sim.ros.launch import STOP_GRACE
 
     entities = list(load_launch_file().generate_launch_description().args[0])
-    sim, ctl = [e for e in entities if type(e) is launch_stubs.launch_ros_actions.Node]
+    (sim,) = [e for e in entities if type(e) is launch_stubs.launch_ros_actions.Node]
+    (group,) = [e for e in entities if type(e) is launch_stubs.launch_actions.GroupAction]
     # ros2 launch: SIGINT (a terminal's, or its own), SIGTERM after sigterm_timeout, SIGKILL sigkill_timeout later
     grace = float(sim.kwargs["sigterm_timeout"]) + float(sim.kwargs["sigkill_timeout"])
     assert grace >= STOP_GRACE  # as long as gyro-sim run --ros waits
     assert sim.kwargs["on_exit"] == launch_stubs.launch_actions.Shutdown(reason="the simulator node ended")
-    assert "on_exit" not in ctl.kwargs  # (the controller ending alone does not end the run)
+    for ctl in group.kwargs["actions"]:
+        assert "on_exit" not in ctl.kwargs  # (the controller ending alone does not end the run)
 
 
 # --- gyro-sim run --ros: what it says for each status of the simulator (launch() replaced) -------------------

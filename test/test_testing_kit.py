@@ -229,14 +229,14 @@ def test_a_controller_that_never_subscribes(gyro_bench):
 
 @needs_ros
 def test_a_controller_that_subscribes_and_never_answers(gyro_bench):
-    """No command at all: the simulator waits startup_timeout for the first, its watchdog fires, the run ends
-    with zero currents; the kit raises quoting the watchdog's line. The bag is there to look at."""
+    """No command at all: the simulator waits startup_timeout for the first, then counts the controller as lost and
+    stops the run (on_controller_lost stop); the kit raises quoting that line. The bag is there to look at."""
     with pytest.raises(ControllerError) as ei:
         gyro_bench.run("spinup_thin_shell", controller=MUTE, **QUICK)
     e = ei.value
     print(f"\n  {e}".replace("\n", "\n  "))
     assert e.kind == "no_answer" and "no command was applied in the whole run" in str(e)
-    assert e.status_line.startswith("watchdog: no command since the start (startup_timeout 3 s)")
+    assert e.status_line.startswith("controller lost at t = 0 s: no command since the start (startup_timeout 3 s)")
     _says_the_protocol(e)
     assert e.run is not None and (e.run.bag / "metadata.yaml").exists() and not e.run.figures["interrupted"]
 
@@ -244,8 +244,8 @@ def test_a_controller_that_subscribes_and_never_answers(gyro_bench):
 @needs_ros
 @pytest.mark.parametrize("fail_fast", [True, False])
 def test_a_controller_that_answers_with_wall_clock_stamps(gyro_bench, fail_fast):
-    """fail_fast (the default): the first refusal ends the run; without it the run goes on (the watchdog fires
-    after startup_timeout) and the kit raises at its end, no command having been applied."""
+    """fail_fast (the default): the first refusal ends the run; without it the run goes on (the controller counts
+    as lost after startup_timeout: the run stops) and the kit raises at its end, no command having been applied."""
     with pytest.raises(ControllerError) as ei:
         gyro_bench.run("spinup_thin_shell", controller=WALL_CLOCK_STAMPS, fail_fast=fail_fast, **QUICK)
     e = ei.value

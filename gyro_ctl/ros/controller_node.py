@@ -7,8 +7,10 @@ scene's ``controller`` section and can be overridden by ROS parameters (also at 
 ``ros2 param set``); a value that does not validate, a stator the scene does not have, or a parameter
 of a law not in force is refused with the reason. The parameters always show what is in force.
 
-The node runs until it is stopped: SIGINT or SIGTERM ends it cleanly (its last commands flushed) with exit status
-130 or 143 (:func:`gyro_sim.ros.common.node_main`); 2: a refused scene or parameter (one ``controller: error:`` line).
+The node ends after the simulator's final status (``done:`` on ``gyro/status``, once it has answered a state of
+that run) with exit status 0, unless ``keep_alive`` is true; SIGINT or SIGTERM ends it cleanly (its last commands
+flushed) with exit status 130 or 143 (:func:`gyro_sim.ros.common.node_main`); 2: a refused scene or parameter (one
+``controller: error:`` line).
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from pydantic import ValidationError
 
-from gyro_sim.messages import TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS, node_topic
+from gyro_sim.messages import TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS, node_topic
 from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
 from gyro_sim.scene import SceneError, load_scene
 from gyro_sim.simulate import stator_triad
@@ -196,6 +198,9 @@ class ControllerNode(Node):
             additional_constraints="one of: spinup, psi_switching, off, hold, manual, reorient"))
         for name, (_, kind, _) in LAW_PARAMS.items():
             self.declare_parameter(name, _UNSET[kind], _describe(name))
+        self.declare_parameter("keep_alive", False, ParameterDescriptor(
+            description="stay running after the simulator's final status (done: on gyro/status); false: exit 0 "
+                        "then, once this node has answered a state of that run", read_only=True))
         try:
             self.scene = load_scene(self.get_parameter("scene").value)
         except SceneError as e:
@@ -224,6 +229,10 @@ class ControllerNode(Node):
                                  qos_profile(TOPIC_IMU))
         self.subs["L"] = self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT),
                                  lambda m: self._on(m, "L"), qos_profile(TOPIC_KINETIC_MOMENT))
+        self.answered = 0  # commands published (a done: line before the first is an earlier run's: ignored)
+        self.finished = False  # the simulator's run is done (and keep_alive is false): the loop ends
+        self.status_sub = self.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
+                                                   self._on_status, qos_profile(TOPIC_STATUS))
         self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}"
                                + _expected_time_constant(self.scene, cfg))
 
@@ -266,6 +275,12 @@ class ControllerNode(Node):
             self._showing = False
 
     # --- state in, command out ---------------------------------------------------------------
+    def _on_status(self, msg) -> None:
+        """The simulator's final ``done:`` line ends this node (not with ``keep_alive``; not a line of a run it did
+        not answer: gyro/status is latched, a late joiner gets the last lines of an earlier run)."""
+        if msg.data.startswith("done:") and self.answered and not self.get_parameter("keep_alive").value:
+            self.finished = True
+
     def _on(self, msg, kind: str) -> None:
         key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         entry = self.pending.setdefault(key, {})
@@ -292,6 +307,7 @@ class ControllerNode(Node):
         if any(r is not None for r in rates):
             out.velocity = [float(r) for r in rates]
         self.pub.publish(out)
+        self.answered += 1
 
 
 def _expected_time_constant(scene, cfg) -> str:
@@ -319,21 +335,26 @@ def _same(a: Parameter, b: Parameter) -> bool:
     return va == vb or (va != va and vb != vb)
 
 
+#: wall s between executor turns (parameters, services, gyro/status) while states come
+PUMP_PERIOD = 0.05
+
+
 def _spin(node: ControllerNode, stop: threading.Event) -> int:
-    """The states are polled while they come (a lockstep exchange: no executor wait per message, see
-    gyro_sim.ros.common.BUSY_POLL); parameters and services, and the states after a quiet spell, go through the
-    executor."""
-    import os
+    """The states are taken as they come, and between them the node blocks in a wait on its two state
+    subscriptions (:class:`gyro_sim.ros.common.MessageWait`: no busy poll, the core stays free for the simulator);
+    parameters, services and gyro/status go through the executor every :data:`PUMP_PERIOD` s. Ends on a signal, or
+    after the simulator's final ``done:`` status (unless ``keep_alive``)."""
     import time
 
-    from gyro_sim.ros.common import BUSY_POLL, exit_status, make_executor, take
+    from gyro_sim.ros.common import MessageWait, exit_status, make_executor, take
 
     executor = make_executor()
     executor.add_node(node)
     subs = list(node.subs.items())
-    last = next_spin = time.perf_counter()
+    waiter = MessageWait(node, [sub for _, sub in subs])
+    next_pump = 0.0
     try:
-        while not stop.is_set() and rclpy.ok():
+        while not stop.is_set() and rclpy.ok() and not node.finished:
             got = False
             for kind, sub in subs:
                 msg = take(sub)
@@ -341,16 +362,16 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
                     node._on(msg, kind)
                     got = True
             now = time.perf_counter()
-            if got:
-                last = now
-            if now < next_spin and now - last < BUSY_POLL:
-                os.sched_yield()
-                continue
-            executor.spin_once(timeout_sec=0.1 if now - last >= BUSY_POLL else 0.0)
-            next_spin = time.perf_counter() + 0.05
+            if now >= next_pump:
+                executor.spin_once(timeout_sec=0.0)
+                next_pump = time.perf_counter() + PUMP_PERIOD
+            elif not got:
+                waiter.wait(min(PUMP_PERIOD, next_pump - now))
     finally:
         executor.shutdown()
-    return exit_status(stop)  # 130 / 143: stopped by SIGINT / SIGTERM (0: the context was shut down otherwise)
+    if node.finished:
+        node.get_logger().info("controller: the simulator's run is done; exiting (keep_alive:=true keeps it running)")
+    return exit_status(stop)  # 0: done (or the context was shut down); 130 / 143: stopped by SIGINT / SIGTERM
 
 
 def usage() -> str:
@@ -358,7 +379,8 @@ def usage() -> str:
     from gyro_sim.ros.common import node_usage
 
     base = (("scene", "spinup_thin_shell", "scene file path or built-in name (read-only)"),
-            ("law", "", "'' (the scene's), " + ", ".join(sorted(ROS_LAWS)) + ", off, hold"))
+            ("law", "", "'' (the scene's), " + ", ".join(sorted(ROS_LAWS)) + ", off, hold"),
+            ("keep_alive", False, "stay running after the simulator's final done: status (read-only)"))
     return node_usage("ros2 run gyro_ctl controller",
                       base + tuple((n, _UNSET[k], f"{law}: {d}") for n, (law, k, d) in LAW_PARAMS.items()))
 

@@ -518,48 +518,47 @@ def _once(fn) -> float:
     return time.process_time() - c0
 
 
+def _only_part(res: Results, only: str) -> None:
+    """Run the part ``only`` (``gyro-sim bench --only``) into ``res``."""
+    cfg = res.config
+    quick = cfg.mode == "quick"
+    if only in ("startup", "sweep"):
+        scaling_parts(res, only)
+    elif only == "accuracy":
+        from gyro_sim.apps.bench_accuracy import accuracy_part
+
+        accuracy_part(res, quick, list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
+    elif only == "cost":
+        from gyro_sim.apps.bench_cost import cost_part
+
+        cost_part(res, quick, _say)
+    elif only == "rk4":
+        from gyro_sim.apps.bench_rk4 import rk4_part
+
+        rk4_part(res, quick, _say)
+    elif only == "estimate":
+        from gyro_sim.apps.bench_estimate import estimate_part
+
+        estimate_part(res, cfg)
+    elif only == "ticks":
+        from gyro_sim.apps.bench_ticks import output_rate_part, ticks_part
+
+        ticks_part(res, quick=quick)
+        output_rate_part(res, quick=quick)
+    elif only == "ros":
+        from gyro_sim.apps.bench_ros import ros_part
+
+        ros_part(res, quick=quick)
+    else:
+        raise ValueError(f"--only {only!r}: no such part")
+
+
 def run_bench(cfg: BenchConfig, out: Path, command: str = "") -> Results:
     """Run every part of ``cfg``, write DIR/bench.md, bench.csv, work_precision.png; return the results."""
     res = Results(cfg, started=_dt.datetime.now().astimezone().isoformat(timespec="seconds"), command=command)
     w0 = time.perf_counter()
-    if cfg.only in ("startup", "sweep"):
-        scaling_parts(res, cfg.only)
-        res.wall_total = time.perf_counter() - w0
-        write_outputs(res, Path(out))
-        return res
-    if cfg.only == "accuracy":
-        from gyro_sim.apps.bench_accuracy import accuracy_part
-
-        accuracy_part(res, cfg.mode == "quick", list(cfg.accuracy_scenes) if cfg.accuracy_scenes else None, _say)
-        res.wall_total = time.perf_counter() - w0
-        write_outputs(res, Path(out))
-        return res
-    if cfg.only == "cost":
-        from gyro_sim.apps.bench_cost import cost_part
-
-        cost_part(res, cfg.mode == "quick", _say)
-        res.wall_total = time.perf_counter() - w0
-        write_outputs(res, Path(out))
-        return res
-    if cfg.only == "rk4":
-        from gyro_sim.apps.bench_rk4 import rk4_part
-
-        rk4_part(res, cfg.mode == "quick", _say)
-        res.wall_total = time.perf_counter() - w0
-        write_outputs(res, Path(out))
-        return res
-    if cfg.only == "estimate":
-        from gyro_sim.apps.bench_estimate import estimate_part
-
-        estimate_part(res, cfg)
-        res.wall_total = time.perf_counter() - w0
-        write_outputs(res, Path(out))
-        return res
-    if cfg.only == "ticks":
-        from gyro_sim.apps.bench_ticks import output_rate_part, ticks_part
-
-        ticks_part(res, quick=cfg.mode == "quick")
-        output_rate_part(res, quick=cfg.mode == "quick")
+    if cfg.only is not None:  # one part alone
+        _only_part(res, cfg.only)
         res.wall_total = time.perf_counter() - w0
         write_outputs(res, Path(out))
         return res
@@ -638,7 +637,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--startup-baseline", metavar="DIR",
                    help="a source tree of the code before (e.g. git archive of a commit): its start-up is timed beside "
                         "this code's, in the same run")
-    p.add_argument("--only", choices=["accuracy", "cost", "estimate", "rk4", "ticks", "startup", "sweep"],
+    p.add_argument("--only", choices=["accuracy", "cost", "estimate", "rk4", "ticks", "startup", "sweep", "ros"],
                    help="run this part alone")
     p.add_argument("--accuracy-scenes", metavar="SCENE", nargs="+",
                    help="scenes of the accuracy part (default: every built-in scene)")

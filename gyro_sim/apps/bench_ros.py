@@ -2,8 +2,9 @@
 
 * first run: ``gyro-sim run SCENE`` (in-process) and ``gyro-sim run SCENE --ros`` as new processes with an empty
   numba cache (``NUMBA_CACHE_DIR`` in a temporary folder: what a fresh install pays) and again with it warm;
-* lockstep: the simulator and controller nodes over DDS (separate processes, localhost), ticks/s and real-time
-  factor against the same scene in-process, measured in the same run;
+* lockstep: the simulator and controller nodes over DDS (separate processes, localhost), ticks/s, real-time
+  factor and command latency p50/p99 against the same scene in-process, measured in the same run, on the machine
+  as it is ("idle") and beside one CPU hog per core (``sh -c 'while :; do :; done'``), with the load average;
 * real time: the 1 kHz ψ-switching scene at ×1, command latency median, p99 and max.
 
 Every node runs as its own process (this process imports no rclpy), on a free ROS domain with localhost-only
@@ -11,6 +12,8 @@ discovery. Figures come from the nodes' own ``done:`` lines and the bags' metada
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import subprocess
 import sys
@@ -23,6 +26,22 @@ __all__ = ["ros_part"]
 
 LOCKSTEP_SCENES = (("spinup_thin_shell", 60.0), ("nutation_oblate", 2.0))
 REALTIME_SCENE = ("nutation_oblate", 2.0)  # 1 kHz control
+
+
+#: a process that burns one CPU until killed (the lockstep rows "with one hog per core")
+HOG = ("sh", "-c", "while :; do :; done")
+
+
+@contextlib.contextmanager
+def cpu_hogs(n: int):
+    """``n`` CPU-burning processes while the block runs (killed at its end, also on an error)."""
+    procs = [subprocess.Popen(HOG) for _ in range(n)]
+    try:
+        yield procs
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
 
 
 def _env(cache: Optional[str] = None) -> dict:
@@ -82,8 +101,16 @@ def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
             ctl.kill()
 
 
-def lockstep(scene: str, duration: float, tmp: Path) -> dict:
-    """The two nodes over DDS in lockstep against the same scene in-process (warm caches)."""
+def lockstep(scene: str, duration: float, tmp: Path, hogs: int = 0) -> dict:
+    """The two nodes over DDS in lockstep against the same scene in-process (warm caches), beside ``hogs`` CPU
+    hogs (both runs)."""
+    with cpu_hogs(hogs):
+        load = os.getloadavg()[0]
+        row = _lockstep(scene, duration)
+    return {**row, "hogs": hogs, "load": load}
+
+
+def _lockstep(scene: str, duration: float) -> dict:
     from gyro_sim.scenes.scene import load_scene
     from gyro_sim.engine.simulate import controller_period, run
 
@@ -138,16 +165,24 @@ def ros_part(res, quick: bool = False) -> None:
             print(f"[ros] {row['what']} ({row['cache']} numba cache): process {row['process_wall']:.2f} s wall, "
                   f"compile {row['compile']:.2f} s, real-time factor {row['rtf']:.4g}", flush=True)
         for scene, duration in LOCKSTEP_SCENES:
-            row = lockstep(scene, duration if not quick else min(duration, 10.0), tmp)
-            res.ros.append({"part": "lockstep", **row})
-            print(f"[ros] lockstep {scene} {row['duration']:g} s: {row['ticks_per_s']:.0f} ticks/s over DDS, "
-                  f"real-time factor {row['rtf_dds']:.1f} over DDS vs {row['rtf_in_process']:.1f} in-process "
-                  f"(latency median {row['latency_median_ms']} ms, p99 {row['latency_p99_ms']} ms)", flush=True)
+            for hogs in (0, os.cpu_count() or 1):
+                row = lockstep(scene, duration if not quick else min(duration, 10.0), tmp, hogs)
+                res.ros.append({"part": "lockstep", **row})
+                print(f"[ros] lockstep {scene} {row['duration']:g} s, {_beside(row)}: {row['ticks_per_s']:.0f} ticks/s "
+                      f"over DDS, real-time factor {row['rtf_dds']:.1f} over DDS vs {row['rtf_in_process']:.1f} "
+                      f"in-process; command latency p50 {row['latency_median_ms']} ms, p99 {row['latency_p99_ms']} ms",
+                      flush=True)
         row = realtime(*REALTIME_SCENE, tmp)
         res.ros.append({"part": "realtime", **row})
         print(f"[ros] real time ×1, {row['scene']} at 1 kHz: command latency median {row['median_ms']:.3f} ms, "
               f"p99 {row['p99_ms']:.3f} ms, max {row['max_ms']:.3f} ms; {row['applied']} commands applied on "
               f"{int(row['duration'] * 1000)} ticks", flush=True)
+
+
+def _beside(row: dict) -> str:
+    """'idle (load 0.6)' or 'one CPU hog per core (2 hogs, load 2.9)': what ran beside a lockstep row."""
+    load = f"load {row.get('load', float('nan')):.1f}"
+    return f"one CPU hog per core ({row['hogs']} hogs, {load})" if row.get("hogs") else f"idle ({load})"
 
 
 def headline(res) -> list[str]:
@@ -162,9 +197,10 @@ def headline(res) -> list[str]:
                        f"{warm['process_wall']:.2f} s with the cache warm (what .ci/setup leaves)")
     for r in res.ros:
         if r["part"] == "lockstep":
-            out.append(f"lockstep over DDS, {r['scene']} ({r['duration']:g} s, {r['ticks']} ticks): "
+            out.append(f"lockstep over DDS, {r['scene']} ({r['duration']:g} s, {r['ticks']} ticks), {_beside(r)}: "
                        f"{r['ticks_per_s']:.0f} closed-loop ticks/s, real-time factor {r['rtf_dds']:.1f} against "
-                       f"{r['rtf_in_process']:.1f} in-process ({r['rtf_in_process'] / r['rtf_dds']:.1f}x)")
+                       f"{r['rtf_in_process']:.1f} in-process; command latency p50 {r['latency_median_ms']} ms, "
+                       f"p99 {r['latency_p99_ms']} ms")
         elif r["part"] == "realtime":
             out.append(f"real time ×1, {r['scene']} at 1 kHz control: command latency median {r['median_ms']:.2f} ms, "
                        f"p99 {r['p99_ms']:.2f} ms, max {r['max_ms']:.2f} ms; commands applied on {r['applied']} of "
@@ -183,7 +219,8 @@ def markdown(res) -> list[str]:
             L.append(f"| first run | `{r['what']}`, {r['cache']} numba cache | process {r['process_wall']:.2f} s wall; "
                      f"compile {r['compile']:.2f} s; real-time factor {r['rtf']:.4g} |")
         elif r["part"] == "lockstep":
-            L.append(f"| lockstep | {r['scene']} {r['duration']:g} s ({r['ticks']} ticks) | {r['ticks_per_s']:.0f} "
+            L.append(f"| lockstep | {r['scene']} {r['duration']:g} s ({r['ticks']} ticks), {_beside(r)} | "
+                     f"{r['ticks_per_s']:.0f} "
                      f"ticks/s; real-time factor {r['rtf_dds']:.1f} (in-process {r['rtf_in_process']:.1f}); "
                      f"command round trip median {r['latency_median_ms']} ms, p99 {r['latency_p99_ms']} ms |")
         else:

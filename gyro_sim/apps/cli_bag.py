@@ -176,8 +176,33 @@ def _info_rows(info: dict) -> list:
         rows.append(_error_row(custom["error_estimate"]))
     shown = {"scene_name", "version", "end", "scene", "duration", "planned_duration", "mode", "wall_time",
              "compile_time", "steps", "control_period", "error_estimate"}
-    rows += [(k.replace("_", " "), str(v)) for k, v in sorted(custom.items()) if k not in shown]
+    rows += [(_label(k), _readable(k, v)) for k, v in sorted(custom.items()) if k not in shown]
     return rows
+
+
+def _is_time(key: str) -> bool:
+    """A custom_data key holding seconds (``latency_median_s``; not a rate, ``control_ticks_per_s``)."""
+    return key.endswith("_s") and not key.endswith("_per_s")
+
+
+def _label(key: str) -> str:
+    """The row label of a custom_data key: words, without the unit suffix of a time (its value carries the unit)."""
+    return (key[:-2] if _is_time(key) else key).replace("_", " ")
+
+
+def _readable(key: str, value) -> str:
+    """A custom_data value as shown by ``gyro-sim info``: a real number to 4 significant digits (a time ``*_s``
+    below 1 s in ms: ``latency median  0.412 ms``), anything else (integers, texts) as it is."""
+    text = str(value)
+    try:
+        v = float(text)
+    except ValueError:
+        return text
+    if text.lstrip("-").isdigit() or not math.isfinite(v):
+        return text
+    if _is_time(key):
+        return f"{v * 1e3:.3g} ms" if abs(v) < 1 else _seconds(v)
+    return f"{v:.4g}"
 
 
 def _error_row(text: str) -> tuple:

@@ -244,6 +244,17 @@ def _interrupted(exc: KeyboardInterrupt, what: str = "") -> int:
     return code
 
 
+def _run_failed(bag: Path) -> bool:
+    """Whether a bag's end says its run failed (``failed: …``: a broken state, a lost controller), not its
+    recording."""
+    from gyro_sim.io.recording import bag_info
+
+    try:
+        return str(bag_info(bag)["end_reason"]).startswith("failed:")
+    except Exception:  # (unreadable: not a run's failure it could say)
+        return False
+
+
 def _failed_recording(bag: Path, png: Path) -> int:
     """A ``--ros`` simulator node that ended with status 1, its recording failed (a full disk, a file size limit;
     its log said why): one ``error:`` line with how its bag ended, then the summary of what fit; status 1, as an
@@ -317,8 +328,10 @@ def _run_ros(args, scene, name) -> int:
         status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
         return status if status != EXIT_OK else EXIT_FAILURE
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
-    if code == EXIT_FAILURE and Path(bag).exists():  # its recording failed (a full disk): the bag holds what fit
-        return _failed_recording(bag, Path(args.out) / f"{name}.png")
+    if code == EXIT_FAILURE and Path(bag).exists():
+        if not _run_failed(bag):  # its recording failed (a full disk): the bag holds what fit
+            return _failed_recording(bag, Path(args.out) / f"{name}.png")
+        stopped_by = "the run failed"  # (its state broke or its controller was lost: the bag's end says which)
     if stopped_by is None:
         return _error(f"the simulator node ended with status {code}"
                       + (f" ({signal.Signals(-code).name})" if -code in set(signal.Signals) else ""))

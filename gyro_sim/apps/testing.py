@@ -240,6 +240,9 @@ class _Simulator:
 
 # --- results ----------------------------------------------------------------------------------
 
+#: status lines of a silent controller: the watchdog (real time, free run) and a lost controller (lockstep)
+SILENCE_LINES = ("watchdog: no command", "controller lost")
+
 _DONE = {
     "t_end": r"done: t = (\S+) s",
     "wall_s": r" in (\S+) s wall",
@@ -257,7 +260,7 @@ _DONE = {
 
 def parse_done_line(line: str) -> dict:
     """The figures of the simulator's final ``done: ...`` status line: t_end, wall_s, real_time_factor,
-    control_ticks, ticks_per_s, steps, refused, latency_median_ms / _p99_ms / _max_ms (NaN: no command
+    control_ticks, ticks_per_s, steps, refused, latency_median_ms / _p99_ms / _max_ms (None: no command
     answered a published state), compile_s (0 when nothing compiled), interrupted, line. A figure the line does
     not hold is None."""
     out: dict = {"line": line, "interrupted": line.rstrip().endswith("(interrupted)")}
@@ -322,8 +325,8 @@ class BenchRun:
 
     @property
     def watchdog_events(self) -> list:
-        """(t s, line) of each time the watchdog fired."""
-        return [(float(t), s) for t, s in zip(self.status_t, self.status) if s.startswith("watchdog: no command")]
+        """(t s, line) of each time the watchdog fired or (lockstep) the controller was lost."""
+        return [(float(t), s) for t, s in zip(self.status_t, self.status) if s.startswith(SILENCE_LINES)]
 
     def assert_spin_reached(self, rate: float, by: Optional[float] = None) -> None:
         assert_spin_reached(self, rate, by)
@@ -399,12 +402,15 @@ def assert_no_refusals(run: BenchRun) -> None:
 
 
 def assert_watchdog_never_fired(run: BenchRun) -> None:
-    """The simulator's watchdog never fired (no ``watchdog: no command ...`` status line)."""
+    """The simulator's watchdog never fired and (lockstep) its controller was never lost (no ``watchdog: no command
+    ...`` or ``controller lost ...`` status line)."""
     ev = run.watchdog_events
     if not ev:
         return
-    raise AssertionError(f"the watchdog fired {len(ev)} time(s), first at t = {ev[0][0]:.9g} s: {ev[0][1]!r} "
-                         "(no valid command for watchdog_timeout wall s: every stator current was set to 0 A)")
+    what = ("the controller was lost" if ev[0][1].startswith("controller lost") else "the watchdog fired")
+    raise AssertionError(f"{what} {len(ev)} time(s), first at t = {ev[0][0]:.9g} s: {ev[0][1]!r} "
+                         "(no valid command for watchdog_timeout wall s, or lockstep's controller gone: see "
+                         "on_controller_lost)")
 
 
 # --- the bench --------------------------------------------------------------------------------
@@ -617,14 +623,10 @@ class GyroBench:
                     f"  {line!r}\nA controller must {PROTOCOL}.\n{self._controllers()}", "no_answer", line, run)
             raise ControllerError(f"the controller process ended with an error while the simulator ran ({line}).\n"
                                   f"{self._controllers()}", "exited", line, run)
-        if sim.proc.returncode != 0 or run is None:
-            raise BenchError(f"the simulator (scene {s['scene']!r}) exited with status {sim.proc.returncode}"
-                             + ("" if run is not None else " and left no bag") + "; its output ends with:\n"
-                             + _tail(sim.output))
-        start = _start_figures(next((x for x in run.status if x.startswith("simulator:")), ""))
-        if start["controller_expected"] and not _answered(run):
+        start = _start_figures(next((x for x in run.status if x.startswith("simulator:")), "")) if run else {}
+        if run is not None and start.get("controller_expected") and not _answered(run):
             line = (next((x for x in run.status if x.startswith("refused command: stamp")), None)
-                    or next((x for x in run.status if x.startswith("watchdog: no command")), None))
+                    or next((x for x in run.status if x.startswith(SILENCE_LINES)), None))
             stamps = line is not None and line.startswith("refused command: stamp")
             what = ("the controller answered only with wrong stamps: no command was applied in the run"
                     if stamps else "the controller never answered: no command was applied in the whole run")
@@ -634,6 +636,10 @@ class GyroBench:
                                   f"{params.get('startup_timeout', STARTUP_TIMEOUT):g} s).{said}\n"
                                   f"A controller must {PROTOCOL}.\n{self._controllers()}",
                                   "wrong_stamps" if stamps else "no_answer", line, run)
+        if sim.proc.returncode != 0 or run is None:
+            raise BenchError(f"the simulator (scene {s['scene']!r}) exited with status {sim.proc.returncode}"
+                             + ("" if run is not None else " and left no bag") + "; its output ends with:\n"
+                             + _tail(sim.output))
         return run
 
     def _bench_run(self, sim: _Simulator, bag: Path, params: dict, ctl_out: Optional[str]) -> BenchRun:

@@ -12,7 +12,7 @@ from typing import Callable, Iterable, Optional
 
 from gyro_sim.compiled.compile_watch import compile_seconds
 
-__all__ = ["warm"]
+__all__ = ["warm", "currents_off"]
 
 #: simulated seconds each scene runs: long enough to pass its first control tick and output sample
 WARM_DURATION = 0.05
@@ -33,7 +33,28 @@ def warm(names: Optional[Iterable[str]] = None, say: Callable[[str], None] = pri
         run(scene, duration=d)
         if scene.fidelity != "full" or not scene.output.attitude:
             run(load_scene(name, overrides={"fidelity": "full"}), duration=d, attitude=True)
+        currents_off(load_scene(name, overrides={"fidelity": "full"}), d)
         c = compile_seconds() - c0
         if c > 0:
             say(f"warmup: {name}: compiled in {c:.1f} s ({time.perf_counter() - w0:.1f} s)")
     return compile_seconds() - c_start
+
+
+def currents_off(scene, duration: float) -> None:
+    """Run ``scene`` as the ROS simulator node does (gyro_sim/ros/simulator_node.py: a streamed
+    :class:`~gyro_sim.simulate.Runner` with the attitude) with every stator current set to 0 A at its first control
+    tick after t = 0: the path of a lost controller (``on_controller_lost currents_off``) and of the watchdog, where
+    the torque-free integrator takes over (its kernel compiled mid-run before ``warmup`` ran this)."""
+    from gyro_sim.engine.simulate import Runner, controller_period
+    from gyro_sim.io.recording import STREAM_BUFFER_ROWS
+
+    if not scene.stators:
+        return
+    r = Runner(scene, duration, attitude=True, control_period=controller_period(scene) or 0.01,  # (the node's default)
+               buffer_rows=STREAM_BUFFER_ROWS)
+    zero = {n: (0.0, None) for n in r.sim.stator_names}
+    while not r.done:
+        if r.row > 0 and r.is_control_tick:
+            r.apply_commands(zero)
+        r.advance()
+        r.release()

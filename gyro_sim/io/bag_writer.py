@@ -440,8 +440,8 @@ class BagRecorder:
         self._end = f"interrupted: {reason}"
 
     def run_failed(self, failure: str) -> None:
-        """Mark the run as failed: its state broke (custom_data ``gyro_sim.end`` = ``failure``, the Runner's
-        ``failed: <what> at t = … s``; the bag holds the samples before it)."""
+        """Mark the run as failed (custom_data ``gyro_sim.end`` = ``failure``, ``failed: <what> at t = … s``: its
+        state broke (the Runner's failure; the bag holds the samples before it) or its controller was lost)."""
         self._end = failure
 
     @property

@@ -17,10 +17,13 @@ Signals and lifetime (``gyro-sim run --ros``):
   (:func:`gyro_sim.ros.common.watch_parent`: it looks every 0.5 s, then sends itself SIGTERM). Either way the node
   stops as on SIGTERM: its bag is closed, marked interrupted.
 * A signal that comes while a node starts up ends it quietly (:data:`NODE_BOOT`), with 130 / 143.
+* A controller that ends with an error (or is killed) while the simulator runs: the launcher says so and sends the
+  simulator :data:`CONTROLLER_ENDED_SIGNAL`, whose ``on_controller_lost`` policy then applies (default ``stop``: the
+  bag is marked ``failed: controller lost at t = …``, status 1).
 * :func:`launch` returns the simulator's exit status: 0 the run reached its end, 130 / 143 it was stopped by
   SIGINT / SIGTERM (also when the node was ended by the signal before it could handle it: -2 / -15 are given as
-  130 / 143), anything else a failure (2: the node refused its scene or a parameter; negative: killed by that
-  signal).
+  130 / 143), anything else a failure (1: the run failed, e.g. its controller was lost; 2: the node refused its scene
+  or a parameter; negative: killed by that signal).
 """
 from __future__ import annotations
 
@@ -35,6 +38,10 @@ from typing import Callable, Optional
 
 #: SIGINT/SIGTERM: what stops the nodes (and ``gyro-sim run --ros``) cleanly
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # (SIGHUP: the terminal closed; 129)
+#: the signal the launcher sends the simulator when the controller's process ended with an error while the run goes on
+#: (a SIGKILL, a crash): the simulator applies its ``on_controller_lost`` policy at once (the ROS graph shows a killed
+#: process for ~20 s more: DDS's lease). Blocked in the nodes from the fork until the simulator's handler is set.
+CONTROLLER_ENDED_SIGNAL = signal.SIGUSR1
 #: the environment variable naming the process a node must not outlive (:func:`gyro_sim.ros.common.watch_parent`)
 PARENT_PID_ENV = "GYRO_SIM_PARENT_PID"
 STOP_GRACE = 30.0  # wall s the simulator has, after a forwarded signal, to close its bag before SIGKILL
@@ -98,7 +105,7 @@ def node_preexec() -> Callable[[], None]:
         except (OSError, AttributeError):
             prctl = None
     parent = os.getpid()
-    stop = set(STOP_SIGNALS)
+    stop = set(STOP_SIGNALS) | {CONTROLLER_ENDED_SIGNAL}
 
     def preexec() -> None:  # nothing here may need a lock another thread of the parent could hold
         signal.pthread_sigmask(signal.SIG_BLOCK, stop)
@@ -237,3 +244,5 @@ def _run(sim: subprocess.Popen, ctl: Optional[subprocess.Popen], sigs: _Signals)
             ctl_seen = True
             if not sigs.got and ctl.returncode != 0:
                 _say(f"the controller node ended with status {ctl.returncode} while the simulator runs")
+                if sim.poll() is None:
+                    sim.send_signal(CONTROLLER_ENDED_SIGNAL)  # its on_controller_lost policy applies now

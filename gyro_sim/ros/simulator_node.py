@@ -34,9 +34,10 @@ status topic, the ``done:`` line (no error estimate) and the bag's ``gyro_sim.en
 """
 from __future__ import annotations
 
+import contextlib
 import math
-import os
 import re
+import signal
 from collections import deque
 import sys
 import threading
@@ -57,8 +58,9 @@ from gyro_sim.engine.faults import FaultConfig, Faults
 from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.io.recording import STREAM_BUFFER_ROWS, RecordingError
 from gyro_sim.engine.simulate import Runner, controller_period
-from gyro_sim.ros.common import (BUSY_POLL, exit_status, make_executor, message_class, node_main, parse_command, qos_profile,
-                     signal_name, take, wait_for_matches)
+from gyro_sim.ros.common import (MessageWait, exit_status, make_executor, message_class, node_main, parse_command,
+                                 qos_profile, signal_name, take, wait_for_matches)
+from gyro_sim.ros.launch import CONTROLLER_ENDED_SIGNAL
 
 MODES = ("lockstep", "realtime", "freerun")
 #: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
@@ -72,7 +74,13 @@ PUMP_PERIOD = 0.05  # wall s between executor turns (services, parameters) while
 MAX_COMMANDS_PER_TICK = 100  # commands taken at one tick (the subscription keeps the last 100)
 LATENCY_WINDOW = 100_000  # command latencies kept (the last ones): the done line's median, p99, max
 PUBLISHED_KEPT = 1000  # publish times of unanswered states kept (for the latency of a late answer)
-RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks")
+RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ticks", "controller_timeout")
+#: what lockstep does when its controller is lost (parameter on_controller_lost)
+LOST_POLICIES = ("stop", "wait", "currents_off")
+LIVENESS_PERIOD = 0.25  # wall s between looks at the controller's presence while lockstep waits for it
+WAIT_SLICE = 0.05  # wall s at most one blocking wait lasts (a signal is seen when it returns)
+#: exit status of a run that failed (its controller lost, policy stop): the bag's end says ``failed: ...``
+EXIT_FAILED = 1
 #: the node's parameters: (name, default, description, range, read-only); defaults None come from the scene
 PARAMETERS = (
     ("scene", "spinup_thin_shell", "scene file path or built-in scene name", None, True),
@@ -86,8 +94,15 @@ PARAMETERS = (
      f"period; {DEFAULT_CONTROL_PERIOD:g} s for a scene without a controller section)", (1e-6, 3600.0), True),
     ("expect_controller", None, "a controller is expected (default: the scene has a controller section): lockstep "
      "waits for its command at each tick, the watchdog watches it", None, True),
-    ("watchdog_timeout", 2.0, "wall s without a valid command before the currents go to 0 A (0 = off)",
-     (0.0, 3600.0), False),
+    ("watchdog_timeout", 2.0, "realtime and freerun: wall s without a valid command before the currents go to 0 A "
+     "(0 = off; lockstep has no watchdog: see on_controller_lost)", (0.0, 3600.0), False),
+    ("on_controller_lost", "stop", "lockstep: what to do when the controller is lost (its process ended, its "
+     "publisher left the ROS graph, or it did not answer within controller_timeout / startup_timeout): stop (the "
+     "run ends, bag 'failed: controller lost at t = ...', exit status 1), wait (for it to come back), currents_off "
+     "(all currents 0 A, the run goes on without waiting; recorded)", None, True),
+    ("controller_timeout", 60.0, "lockstep: wall s a controller present in the ROS graph may take to answer one "
+     "state before it counts as lost (a hung one; 0 = no bound). Never a load-dependent result: a slow answer is "
+     "waited for", (0.0, 86400.0), False),
     ("startup_timeout", 30.0, "wall s to wait for the first command (lockstep) or for the subscribers of "
      "wait_for_subscribers (0 = no bound)", (0.0, 3600.0), False),
     ("wait_for_subscribers", 0, "before the first step, wait (at most startup_timeout) until this many "
@@ -157,6 +172,9 @@ class SimulatorNode(Node):
         p = self.params()
         if p["mode"] not in MODES:
             raise SceneError(f"parameter mode = {p['mode']!r}: allowed: {', '.join(MODES)}")
+        if p["on_controller_lost"] not in LOST_POLICIES:
+            raise SceneError(f"parameter on_controller_lost = {p['on_controller_lost']!r}: allowed: "
+                             f"{', '.join(LOST_POLICIES)}")
         if p["record"] and Path(p["record"]).exists():
             raise SceneError(f"parameter record = {p['record']!r}: already exists; give a new directory")
         self.live = {k: p[k] for k in RUNTIME_PARAMS}
@@ -191,6 +209,10 @@ class SimulatorNode(Node):
         self.t_now = 0.0  # simulation time, for the service replies (set by the loop)
         self.latencies: deque = deque(maxlen=LATENCY_WINDOW)  # s; the done line's figures are over these
         self.published_wall: dict[int, float] = {}
+        #: stamp (ns) -> publications of that state to a subscriber, less the answers to it so far: lockstep drops an
+        #: answer to a state since the previous tick quietly while this is > 0, refuses it after (a second answer
+        #: to a state published once is a wrong stamp: e.g. a controller stamping every answer 0)
+        self.published_n: dict[int, int] = {}
 
     # --- parameters --------------------------------------------------------------------------
     def _declare(self, name, default, description, rng=None, read_only=False):
@@ -291,9 +313,12 @@ class SimulatorNode(Node):
                     if msgs.get(topic) is not None:
                         self.publish(topic, msgs[topic])
             self.published_wall[ns] = now
-        if len(self.published_wall) > PUBLISHED_KEPT:  # states no one answered (no controller, or a dead one)
-            for k in sorted(self.published_wall)[:-PUBLISHED_KEPT // 10]:
-                del self.published_wall[k]
+            if topics:  # (published to no one: no answer to expect)
+                self.published_n[ns] = self.published_n.get(ns, 0) + 1
+        if len(self.published_n) > PUBLISHED_KEPT:  # states no one answered (no controller, or a dead one)
+            for k in sorted(self.published_n)[:-PUBLISHED_KEPT // 10]:
+                del self.published_n[k]
+                self.published_wall.pop(k, None)
 
 
 def last_sample(s: dict) -> dict:
@@ -310,10 +335,16 @@ class Loop:
         self.p = p = node.params()
         self.mode = p["mode"]
         self.expect = bool(p["expect_controller"])
+        self.lockstep_waits = self.mode == "lockstep" and self.expect  # lockstep waits for each tick's command
         self.recorder = None
         self.refused = 0
         self.next_pump = 0.0
         self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
+        self.waiter = MessageWait(node, [node.command_sub])
+        #: set by CONTROLLER_ENDED_SIGNAL: the launcher saw the controller's process end (gyro_sim.ros.launch)
+        self.controller_ended = threading.Event()
+        self.failed: Optional[str] = None  # the run failed: what (the bag's end is 'failed: <this>')
+        self.lost_log: list = []  # (t, why, policy) of each time the controller was lost
         self.new_run()  # before the bag is opened: a run that cannot be made leaves no half-written bag
         if p["record"]:
             from gyro_sim.io.recording import BagRecorder, scene_text, stator_frames
@@ -338,7 +369,9 @@ class Loop:
         node.faults = Faults(node.fault_config, len(self.names)) if node.fault_config.active else None
         self.latest = None  # latest valid command (names, current, rate, stamp_ns)
         self.have_cmd = False
-        self.watchdog_fired = False
+        self.watchdog_fired = False  # currents zeroed for a silent controller (the watchdog, or a lost one)
+        self.lost = False  # lockstep: the controller is lost (policy wait or currents_off: until it answers again)
+        self.controller_seen = False  # a publisher of gyro/stator_commands was matched in this run
         self.fired_ns = 0
         self.n_ticks = 0
         self.last_published: dict = {}
@@ -349,6 +382,7 @@ class Loop:
         self.prev_tick_ns = self.tick_ns = -1
         self.waiting_since: Optional[float] = None
         node.published_wall.clear()
+        node.published_n.clear()
         node.commands.clear()
         node.latencies.clear()
         self.wall0 = self.last_cmd_wall = self.last_diag = time.perf_counter()
@@ -382,6 +416,8 @@ class Loop:
     def run_state(self) -> tuple[int, str]:
         """(diagnostic level, message) of the run now."""
         t = self.runner.sim.t
+        if self.lost or self.failed:
+            return DIAG_WARN, f"controller lost (on_controller_lost {self.p['on_controller_lost']})"
         if self.watchdog_fired:
             return DIAG_WARN, f"watchdog fired: no valid command for {self.node.live['watchdog_timeout']:g} s"
         if self.waiting_since is not None and time.perf_counter() - self.waiting_since > 1.0:
@@ -409,7 +445,10 @@ class Loop:
                   "real_time_factor": f"{t / wall:.4g}", "control_ticks": self.n_ticks,
                   "ticks_per_s": f"{self.n_ticks / wall:.4g}", "commands_refused": self.refused,
                   "expect_controller": str(self.expect).lower(), "paused": str(self.node.control.paused).lower(),
-                  "watchdog": "off" if not (self.expect and wd > 0) else ("fired" if self.watchdog_fired else "armed")}
+                  "watchdog": "off" if not (self.expect and wd > 0 and not self.lockstep_waits) else (
+                      "fired" if self.watchdog_fired else "armed")}
+        if self.lockstep_waits:
+            values["controller"] = "lost" if (self.lost or self.failed) else "present"
         fields = diagnostics_message(t, f"{self.node.get_fully_qualified_name()}: run",
                                      self.node.get_fully_qualified_name(), level, message, values)
         self.node.publish(TOPIC_DIAGNOSTICS, fields)
@@ -435,11 +474,16 @@ class Loop:
             return False
         ns = cmd[3]
         if strict and ns != pending and not (self.watchdog_fired and self.published(ns, self.fired_ns)):
-            if not (self.published(ns, self.prev_tick_ns) or self.published(ns, 0, self.prev_run_ns)):
+            # quiet: an answer to a state published since the previous tick, no more answers than publications of
+            # it (a state published again gets a second answer); or a late answer to the previous run's states
+            if not ((self.published(ns, self.prev_tick_ns) and self.answerable(ns))
+                    or self.published(ns, 0, self.prev_run_ns)):
                 self.report_refusal("stamp", f"stamp = {ns * 1e-9:.9f} s: lockstep waits for the command stamped "
                                     f"{pending * 1e-9:.9f} s (answer each published state with its header stamp)",
                                     wall)
             return False
+        if strict:
+            self.answerable(ns)  # this answer uses up one publication of its state
         self.latest = cmd
         self.last_cmd_wall = max(self.last_cmd_wall, wall)  # (a command queued while paused: not later than resume)
         self.have_cmd = True
@@ -447,10 +491,21 @@ class Loop:
         pub = published.pop(ns, None)
         if pub is not None:
             self.node.latencies.append(wall - pub)
-        if self.watchdog_fired:
+        if self.lost:
+            self.lost = self.watchdog_fired = False
+            self.status(f"controller back at t = {self.runner.sim.t:.9g} s: lockstep resumes")
+        elif self.watchdog_fired:
             self.watchdog_fired = False
             self.status("watchdog: commands are back; control resumed")
         return ns == pending
+
+    def answerable(self, ns: int) -> bool:
+        """Whether the state stamped ``ns`` was published more often than answered so far; counts this answer."""
+        n = self.node.published_n.get(ns, 0)
+        if n <= 0:
+            return False
+        self.node.published_n[ns] = n - 1
+        return True
 
     def published(self, ns: int, lo: int, hi: Optional[int] = None) -> bool:
         """Whether ``ns`` is the stamp of an output sample in [lo, hi] (hi: the present time), i.e. of a state
@@ -484,42 +539,101 @@ class Loop:
                     return
             self.take(msg, wall, pending, strict)
 
-    def wait_for(self, stamp: int, timeout: float) -> bool:
-        """Lockstep: wait (≤ timeout wall s) for the command stamped ``stamp``. While waiting, the last state is
-        published again every 0.5 s, so a state lost before discovery completed does not stall the loop (the
-        controller answers a repeat identically)."""
+    def wait_for(self, stamp: int) -> Optional[str]:
+        """Lockstep: wait for the command stamped ``stamp``, however long a live controller takes (a wall-clock
+        timeout must not change a lockstep result); None when it came (or the run is stopped), else why the
+        controller counts as lost (:meth:`why_lost`). Between messages the loop blocks in a wait on the command
+        subscription (:class:`MessageWait`: no busy poll). While waiting, the last state is published again every
+        0.5 s, so a state lost before discovery completed does not stall the loop (the controller answers a repeat
+        identically)."""
         q, sub = self.node.commands, self.node.command_sub
         now = time.perf_counter()
-        deadline, resend, poll_until = now + timeout, now + 0.5, now + BUSY_POLL
+        start, resend, look = now, now + 0.5, now + LIVENESS_PERIOD
         self.waiting_since = now
         try:
             while not self.stop.is_set():
                 while q:
                     msg, wall = q.popleft()
                     if self.take(msg, wall, stamp, True):
-                        return True
-                msg = take(sub)  # polled first: the answer of a lockstep controller comes within a millisecond
+                        return None
+                msg = take(sub)
                 if msg is not None:
                     if self.take(msg, time.perf_counter(), stamp, True):
-                        return True
+                        return None
                     continue
                 self.pump()  # services and parameters meanwhile
                 now = time.perf_counter()
-                if now < poll_until:
-                    os.sched_yield()
-                    continue
-                left = deadline - now
-                if left <= 0:
-                    return False
-                self.spin_once(min(left, 0.05))
-                if not q:
-                    if time.perf_counter() > resend and self.last_published:
-                        self.node.publish_samples(self.last_published["s"], self.names)
-                        resend = time.perf_counter() + 0.5
+                if now >= look:
+                    look = now + LIVENESS_PERIOD
+                    why = self.why_lost(now - start)
+                    if why:
+                        return why
                     self.diagnostics()
-            return False
+                if now >= resend:
+                    if self.last_published:
+                        self.node.publish_samples(self.last_published["s"], self.names)
+                    resend = now + 0.5
+                self.waiter.wait(min(WAIT_SLICE, look - now, resend - now, max(self.next_pump - now, 0.0)))
+            return None
         finally:
             self.waiting_since = None
+
+    def why_lost(self, waited: float) -> str:
+        """'' while the controller counts as present, else why it is lost: its process ended (the launcher's
+        :data:`CONTROLLER_ENDED_SIGNAL`), its publisher of gyro/stator_commands left the ROS graph, or no command
+        for startup_timeout (the first of a run) or controller_timeout (a hung one) wall s. (A policy ``wait``
+        already lost it: only its coming back counts.)"""
+        if self.lost:
+            return ""
+        live = self.node.live
+        if self.controller_ended.is_set():
+            self.controller_ended.clear()
+            return "its process ended (gyro-sim run --ros)"
+        present = self.node.command_sub.get_publisher_count() > 0
+        if present:
+            self.controller_seen = True
+        elif self.controller_seen:
+            return "its publisher of gyro/stator_commands left the ROS graph"
+        if not self.have_cmd:
+            bound = live["startup_timeout"]
+            if bound > 0 and waited > bound:
+                return f"no command since the start (startup_timeout {bound:g} s)"
+        else:
+            bound = live["controller_timeout"]
+            if bound > 0 and waited > bound:
+                return f"no answer for {bound:g} s (controller_timeout)"
+        return ""
+
+    def controller_lost(self, why: str, now_ns: int) -> None:
+        """Apply the ``on_controller_lost`` policy (lockstep), once per loss: ``stop`` ends the run (failed),
+        ``wait`` waits on for it, ``currents_off`` zeroes every current and runs on without waiting."""
+        policy = self.p["on_controller_lost"]
+        t = self.runner.sim.t
+        self.lost_log.append((t, why, policy))
+        if self.recorder is not None:
+            self.recorder.set_custom("gyro_sim.controller_lost", "; ".join(
+                f"t = {x:.9g} s: {w} ({pol})" for x, w, pol in self.lost_log))
+        what = f"controller lost at t = {t:.9g} s: {why}"
+        if policy == "stop":
+            self.failed = f"controller lost at t = {t:.9g} s"
+            self.status(f"{what}; the run stops (on_controller_lost stop)", warn=True)
+        elif policy == "wait":
+            self.lost = True
+            self.status(f"{what}; waiting for it to come back (on_controller_lost wait)", warn=True)
+        else:
+            self.lost = self.watchdog_fired = True
+            self.fired_ns = now_ns
+            self.zero_currents()
+            self.status(f"{what}; all stator currents set to 0 A, the run goes on (on_controller_lost currents_off)",
+                        warn=True)
+        self.diagnostics(force=True)
+
+    def zero_currents(self) -> None:
+        """Every stator current to 0 A (recorded like a command); a dead controller's delayed commands dropped."""
+        faults = self.node.faults
+        if faults is not None:
+            faults.fifo.clear()  # a dead controller's delayed commands must not undo the zeroing
+        self.apply((self.names, [0.0] * len(self.names), None, None))
 
     def apply(self, cmd) -> None:
         nm, cur, rate, _ = cmd
@@ -543,9 +657,13 @@ class Loop:
         wd = self.node.live["watchdog_timeout"]
         strict = self.mode == "lockstep" and self.expect
         if strict and not self.watchdog_fired:
-            timeout = wd if self.have_cmd else self.node.live["startup_timeout"]
-            if not self.wait_for(now, timeout if timeout > 0 else math.inf):
+            why = self.wait_for(now)
+            while why:  # lost: the policy says what next (wait: on waiting, for it to come back)
                 self.latest = None
+                self.controller_lost(why, now)
+                why = self.wait_for(now) if self.lost and not self.watchdog_fired else ""
+            if self.failed:
+                return
         else:
             self.drain(now, strict)
         cmd, self.latest = self.latest, None  # (the next tick takes only what comes for it)
@@ -554,11 +672,10 @@ class Loop:
             cmd = faults.command(cmd)  # dropped, corrupted, delayed, quantised (gyro_sim.faults)
         if cmd is not None:
             self.apply(cmd)
-        if self.expect and wd > 0 and not self.watchdog_fired and time.perf_counter() - self.last_cmd_wall > wd:
+        if (self.expect and not strict and wd > 0 and not self.watchdog_fired
+                and time.perf_counter() - self.last_cmd_wall > wd):
             self.watchdog_fired, self.fired_ns = True, now
-            if faults is not None:
-                faults.fifo.clear()  # a dead controller's delayed commands must not undo the zeroing
-            self.apply((self.names, [0.0] * len(self.names), None, None))  # recorded like any command
+            self.zero_currents()  # recorded like any command
             waited = (f"no command for {wd:g} s" if self.have_cmd else
                       f"no command since the start (startup_timeout {self.node.live['startup_timeout']:g} s)")
             self.status(f"watchdog: {waited}; all stator currents set to 0 A", warn=True)
@@ -631,6 +748,8 @@ class Loop:
                     break
                 if r.row > 0 and r.is_control_tick:
                     self.tick()
+                    if self.failed:
+                        break
                     c = node.control
                     if c.steps_left > 0:
                         c.steps_left -= 1
@@ -690,23 +809,27 @@ class Loop:
 
     def finish(self) -> int:
         r, node = self.runner, self.node
-        # decided once (the bag, the done line and the exit status agree); a run that reached its end is complete, one
-        # whose state broke failed (status 1: Runner.failure)
-        status = (1 if r.failure is not None else 0) if r.done else exit_status(self.stop)
+        # decided once (the bag, the done line and the exit status agree); a run that reached its end is complete; one
+        # whose state broke (Runner.failure) or whose controller was lost (self.failed) failed: status 1
+        failure = r.failure if r.failure is not None else (f"failed: {self.failed}" if self.failed else None)
+        status = EXIT_FAILED if failure is not None else 0 if r.done else exit_status(self.stop)
         wall = self.run_wall()
         compiled = compile_seconds() - self.c0
-        lat = np.array(node.latencies) if node.latencies else np.array([math.nan])
+        lat = np.array(node.latencies)
         est = r.error_estimate()  # the run's estimated error so far (gyro_sim.accuracy)
         if self.recorder is not None:
-            for k, v in (("wall_time", wall), ("compile_time", compiled), ("steps", r.sim.steps), ("duration", r.sim.t),
-                         ("control_ticks_per_s", self.n_ticks / wall), ("latency_median_s", float(np.median(lat))),
-                         ("latency_p99_s", float(np.percentile(lat, 99))), ("latency_max_s", float(np.max(lat)))):
+            figures = [("wall_time", wall), ("compile_time", compiled), ("steps", r.sim.steps), ("duration", r.sim.t),
+                       ("control_ticks_per_s", self.n_ticks / wall)]
+            if lat.size:  # (no command answered a published state: no latency figures)
+                figures += [("latency_median_s", float(np.median(lat))),
+                            ("latency_p99_s", float(np.percentile(lat, 99))), ("latency_max_s", float(np.max(lat)))]
+            for k, v in figures:
                 self.recorder.set_custom(f"gyro_sim.{k}", v)
-            if r.failure is not None:  # (no error estimate of a failed run: its end says what broke)
-                self.recorder.run_failed(r.failure)
-            else:
+            if r.failure is None:  # (no error estimate of a run whose state broke: its end says what broke)
                 self.recorder.set_custom("gyro_sim.error_estimate", est.to_json())
-            if status and r.failure is None:
+            if failure is not None:
+                self.recorder.run_failed(failure)
+            elif status:
                 signum = getattr(self.stop, "signum", None)
                 self.recorder.interrupted(f"signal {signal_name(signum)}" if signum else "stopped")
         if r.failure is not None:
@@ -714,14 +837,17 @@ class Loop:
         self.diagnostics(force=True)
         if self.p["progress"]:
             self.show_progress(end=True)
+        latency = (f"command latency median {np.median(lat) * 1e3:.3f} ms p99 {np.percentile(lat, 99) * 1e3:.3f} ms "
+                   f"max {np.max(lat) * 1e3:.3f} ms" if lat.size else "no command latency (no command answered a "
+                   "published state)")
         self.status(f"done: t = {r.sim.t:g} s in {wall:.3f} s wall ({r.sim.t / wall:.1f}x real time), "
                     f"{self.n_ticks} control ticks ({self.n_ticks / wall:.1f}/s), {r.sim.steps} steps, "
-                    f"{self.refused} commands refused, command latency median {np.median(lat) * 1e3:.3f} ms "
-                    f"p99 {np.percentile(lat, 99) * 1e3:.3f} ms max {np.max(lat) * 1e3:.3f} ms"
+                    f"{self.refused} commands refused, {latency}"
                     + (f" (+ {compiled:.1f} s compiling the kernels, first use)" if compiled else "")
                     + (f", {r.failure}" if r.failure is not None else f", estimated error {est.text()}")
-                    + (" (interrupted)" if status and r.failure is None else ""))
-        return status  # 0 complete; 1 failed; 130 / 143 stopped by SIGINT / SIGTERM (the bag is closed)
+                    + (f" ({failure})" if failure is not None and r.failure is None
+                       else " (interrupted)" if status and failure is None else ""))
+        return status  # 0 complete; 1 failed (state broke, controller lost); 130 / 143 SIGINT / SIGTERM (bag closed)
 
 
 def _scene_text(scene) -> str:
@@ -742,9 +868,26 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
         except (RecordingError, FileExistsError) as exc:  # the record target, checked before the run
             print(f"simulator: error: {exc}", file=sys.stderr)
             return 2
-        return loop.run()
+        with _controller_ended_signal(loop.controller_ended):
+            return loop.run()
     finally:
         executor.shutdown()
+
+
+@contextlib.contextmanager
+def _controller_ended_signal(event: threading.Event):
+    """While the run goes on, :data:`CONTROLLER_ENDED_SIGNAL` (from ``gyro-sim run --ros``: the controller's process
+    ended) sets ``event``; the launcher blocks it from the fork on, so one sent before now is delivered here."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(CONTROLLER_ENDED_SIGNAL, lambda signum, frame: event.set())
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {CONTROLLER_ENDED_SIGNAL})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {CONTROLLER_ENDED_SIGNAL})
+        signal.signal(CONTROLLER_ENDED_SIGNAL, old if old is not None else signal.SIG_DFL)
 
 
 def _spin_and_run(node: SimulatorNode, stop: threading.Event) -> int:
