@@ -324,9 +324,6 @@ def _run_ros(args, scene, name) -> int:
                   with_controller=scene.controller is not None, force=args.force)
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
-    if code == EXIT_FAILURE and Path(bag).exists():  # a run whose state broke (its bag's end: failed: ...)
-        status = _summarise_bag(bag, Path(args.out) / f"{name}.png")
-        return status if status != EXIT_OK else EXIT_FAILURE
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)
     if code == EXIT_FAILURE and Path(bag).exists():
         if not _run_failed(bag):  # its recording failed (a full disk): the bag holds what fit
