@@ -70,30 +70,29 @@ def _initial_rate(scene) -> float:
     return L0 / min(J)
 
 
-def _stator_currents(scene, name: str) -> Iterator[tuple[str, float]]:
-    """(key, current A) of every current the scene gives stator ``name``: its own, its commands', the law's."""
+def _stator_values(scene, name: str, field: str) -> Iterator[tuple[str, float]]:
+    """(key, value) of every ``field`` ("current", A, or "rate", rad/s) the scene gives stator ``name``: its own,
+    its commands', the law's."""
     for i, s in enumerate(scene.stators):
         if s.name == name:
-            yield f"stators.{i}.current", s.current
+            yield f"stators.{i}.{field}", getattr(s, field)
     for i, c in enumerate(scene.commands):
-        if c.stator == name and c.current is not None:
-            yield f"commands.{i}.current", c.current
-    for key, names, cur, _ in _law_values(scene.controller):
-        if cur is not None and name in names:
-            yield key, cur
+        if c.stator == name and getattr(c, field) is not None:
+            yield f"commands.{i}.{field}", getattr(c, field)
+    for key, names, cur, rate in _law_values(scene.controller):
+        v = cur if field == "current" else rate
+        if v is not None and name in names:
+            yield key, v
+
+
+def _stator_currents(scene, name: str) -> Iterator[tuple[str, float]]:
+    """(key, current A) of every current the scene gives stator ``name``."""
+    return _stator_values(scene, name, "current")
 
 
 def _stator_rates(scene, name: str) -> Iterator[tuple[str, float]]:
-    """(key, |rate| rad/s) of every field rate the scene gives stator ``name``."""
-    for i, s in enumerate(scene.stators):
-        if s.name == name:
-            yield f"stators.{i}.rate", s.rate
-    for i, c in enumerate(scene.commands):
-        if c.stator == name and c.rate is not None:
-            yield f"commands.{i}.rate", c.rate
-    for key, names, _, rate in _law_values(scene.controller):
-        if rate is not None and name in names:
-            yield key, rate
+    """(key, rate rad/s) of every field rate the scene gives stator ``name``."""
+    return _stator_values(scene, name, "rate")
 
 
 def _law_values(ctl) -> list[tuple[str, list, Optional[float], Optional[float]]]:
