@@ -38,6 +38,7 @@ from pathlib import Path
 
 from gyro_sim import __version__
 from gyro_sim.common.extras import MissingExtra
+from gyro_sim.compiled.compile_watch import hold_interrupts_while_compiling
 from gyro_sim.apps.console import _write
 
 # the commands, by group, and what they share (re-exported: `cli._cmd_scenes` and the like are the names the parser
@@ -276,6 +277,7 @@ def main(argv=None) -> int:
     statement is the ``try``: a Ctrl-C from the call on is handled.)"""
     try:
         try:
+            hold_interrupts_while_compiling()
             status = _main(argv)
         except MissingExtra as exc:
             status = _error(str(exc))

@@ -13,10 +13,10 @@ import threading
 import time
 from typing import Callable, Literal, Optional, TextIO
 
-__all__ = ["compile_seconds", "announce_compiles", "CompileClock"]
+__all__ = ["compile_seconds", "announce_compiles", "CompileClock", "hold_interrupts_while_compiling"]
 
 _lock = threading.Lock()
-_state = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None}
+_state = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False}
 
 
 def _install() -> None:
@@ -41,8 +41,46 @@ def _install() -> None:
                 if _state["depth"] == 0:
                     _state["total"] += time.perf_counter() - _state["t0"]
 
+        class _LockListener(event.Listener):
+            """numba's compiler lock: held while it compiles or loads a kernel from its cache (LLVM calls back
+            into Python through ctypes there, and a KeyboardInterrupt raised in such a callback is printed and
+            swallowed by ctypes)."""
+
+            def on_start(self, ev):
+                _state["locked"] += 1
+
+            def on_end(self, ev):
+                _state["locked"] -= 1
+                if _state["locked"] == 0 and _state["held"]:
+                    _state["held"] = False
+                    raise KeyboardInterrupt  # (the Ctrl-C held while numba worked: raised in plain Python code)
+
         event.register("numba:compile", _Listener())
+        event.register("numba:compiler_lock", _LockListener())
         _state["installed"] = True
+
+
+def hold_interrupts_while_compiling() -> None:
+    """Where SIGINT has Python's default handler (KeyboardInterrupt): a Ctrl-C that comes while numba compiles or
+    loads a kernel is held until it is done, then raised (a command's start: ``gyro-sim``'s main). Handlers a
+    command installs later (a run's stop flag) are left alone."""
+    import signal
+
+    if "numba" in sys.modules:
+        _install()  # (else kernels.py calls it when it imports numba: a light command imports none)
+
+    def handler(signum, frame):
+        if _state["locked"] > 0:
+            _state["held"] = True
+            return
+        raise KeyboardInterrupt
+
+    handler.default_int = True  # (Python's default in effect: io.signals treats it as that)
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, handler)
+    except ValueError:  # (not the main thread)
+        pass
 
 
 def compile_seconds() -> float:

@@ -43,7 +43,10 @@ import math
 import numpy as np
 from numba import njit
 
+from gyro_sim.compiled.compile_watch import _install as _watch_compiles
 from gyro_sim.compiled.effects import DMP, MAG, NE, ON, T0, body_rate, damper_derivs, magnetizable_moment, torque_body
+
+_watch_compiles()  # (numba's compiles and cache loads watched from its import on: compile_watch)
 
 # ----------------------------------------------------------------------------------------
 # small vector/quaternion helpers

@@ -69,8 +69,9 @@ def sigterm_as_interrupt() -> Iterator[None]:
         raise _interrupt(signum)
 
     sigs = [signal.SIGTERM, signal.SIGHUP]
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        sigs.append(signal.SIGINT)
+    h = signal.getsignal(signal.SIGINT)
+    if h is signal.default_int_handler or getattr(h, "default_int", False):  # (or compile_watch's, which holds it
+        sigs.append(signal.SIGINT)                                           # while numba compiles)
     old = {sig: signal.signal(sig, _raise) for sig in sigs}
     try:
         yield
