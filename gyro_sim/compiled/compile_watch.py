@@ -16,7 +16,7 @@ from typing import Callable, Literal, Optional, TextIO
 __all__ = ["compile_seconds", "announce_compiles", "CompileClock", "hold_interrupts_while_compiling"]
 
 _lock = threading.Lock()
-_state = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False}
+_state: dict = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False}
 
 
 def _install() -> None:
@@ -60,6 +60,19 @@ def _install() -> None:
         _state["installed"] = True
 
 
+class _HoldingHandler:
+    """SIGINT: KeyboardInterrupt, as Python's default handler, but held while numba's compiler lock is (raised when
+    it is released). ``default_int``: io.signals treats it as Python's default."""
+
+    default_int = True
+
+    def __call__(self, signum, frame):
+        if _state["locked"] > 0:
+            _state["held"] = True
+            return
+        raise KeyboardInterrupt
+
+
 def hold_interrupts_while_compiling() -> None:
     """Where SIGINT has Python's default handler (KeyboardInterrupt): a Ctrl-C that comes while numba compiles or
     loads a kernel is held until it is done, then raised (a command's start: ``gyro-sim``'s main). Handlers a
@@ -69,13 +82,7 @@ def hold_interrupts_while_compiling() -> None:
     if "numba" in sys.modules:
         _install()  # (else kernels.py calls it when it imports numba: a light command imports none)
 
-    def handler(signum, frame):
-        if _state["locked"] > 0:
-            _state["held"] = True
-            return
-        raise KeyboardInterrupt
-
-    handler.default_int = True  # (Python's default in effect: io.signals treats it as that)
+    handler = _HoldingHandler()
     try:
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, handler)
