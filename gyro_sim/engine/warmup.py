@@ -46,12 +46,12 @@ def currents_off(scene, duration: float) -> None:
     tick after t = 0: the path of a lost controller (``on_controller_lost currents_off``) and of the watchdog, where
     the torque-free integrator takes over (its kernel compiled mid-run before ``warmup`` ran this)."""
     from gyro_sim.engine.simulate import Runner, controller_period
-    from gyro_sim.io.recording import STREAM_BUFFER_ROWS
 
     if not scene.stators:
         return
+    # (the node streams its rows through a small buffer: the same kernels, whatever the buffer's size)
     r = Runner(scene, duration, attitude=True, control_period=controller_period(scene) or 0.01,  # (the node's default)
-               buffer_rows=STREAM_BUFFER_ROWS)
+               buffer_rows=64)
     zero = {n: (0.0, None) for n in r.sim.stator_names}
     while not r.done:
         if r.row > 0 and r.is_control_tick:
