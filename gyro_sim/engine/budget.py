@@ -74,8 +74,7 @@ def budget_message(sim, T: float, period: Optional[float], steps: float, stops: 
         if _fits(sim, T, acc.rtol, acc.attitude, stops, budget, phase_atol=None, phase=DEFAULT_PHASE) is not None:
             now = (f"phase_atol {acc.phase_atol:g} rad" if acc.phase_atol is not None else f"phase {acc.phase:g}")
             ways.append(f"hold the spin phase relative to itself: leave out accuracy.phase_atol, accuracy.phase "
-                        f"{DEFAULT_PHASE:g} "
-                        f"(now {now})")
+                        f"{DEFAULT_PHASE:g} (now {now})")
     if stops <= 0.5 * budget and not ways:
         att_on = sim.attitude and acc.attitude is not None
         null_fits = att_on and _fits(sim, T, acc.rtol, None, stops, budget) is not None

@@ -19,7 +19,7 @@ from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
 from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
 from gyro_sim.scenes.limits import L_limit
 from gyro_sim.scenes.scene import Scene, SceneError
-from gyro_sim.scenes.tolerance import phase_tolerance
+from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
 
 #: unit round-off of a double (the phases' floor: ErrorEstimate.round_off)
 ROUND_OFF = 2.0 ** -52
@@ -265,12 +265,8 @@ class Runner:
         if self._lazy:
             if not (at_check or tb >= self.T):
                 return
-        else:
-            j = int(np.searchsorted(self._common, tb))
-            i = int(np.searchsorted(self.breaks, tb))
-            if not (j < self._common.size and self._common[j] == tb or not (i < self.breaks.size
-                                                                            and self.breaks[i] == tb)):
-                return
+        elif _holds(self.breaks, tb) and not _holds(self._common, tb):  # (an output sample made a break)
+            return
         self.sync_shadow(tb)
         seg = sim._seg
         assert seg is not None
@@ -299,10 +295,17 @@ class Runner:
         t = sim.t if t is None else t
         if sh is None or not sh.t < t or sim._seg is None:
             return
-        method, free, h = sim._seg[1][5], sim._seg[1][4], sim._seg[1][6]
         s0 = sh.steps
         sh.advance(t)
-        self.control.note_method(method, sim.steps - self._steps_seen, sh.steps - s0,
+        self.count_stretch(sh.steps - s0)
+
+    def count_stretch(self, shadow_steps: int) -> None:
+        """Count the stretch the shadow has just followed (``shadow_steps`` of its steps, the run's since the last
+        count) for the error control's Richardson denominator, under the run's present segment's stepper."""
+        sim = self.sim
+        assert sim._seg is not None  # (it has advanced)
+        _, _, _, _, free, method, h = sim._seg[1]
+        self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
                                  exact=free and sim._free_axis != -1, stiff=h > sim.tau_min)
         self._steps_seen = sim.steps
 
@@ -414,7 +417,7 @@ class Runner:
         # conserved |L| and energy random-walk by u √n of themselves, which turns the phases' rates
         n = max(sim.steps, 1)
         ro = ROUND_OFF * (self._turned * (1.0 + math.sqrt(n)) + n) if att else 0.0
-        sym = symmetry_axis(sim.J) >= 0
+        sym = has_symmetry_axis(sim.J)
         phase_tol = phase_tolerance(acc, 1.0, self._turned) if sym else math.nan
         return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq + ro) if att else math.nan, steps_L=sL,
                              steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
@@ -518,6 +521,12 @@ class Runner:
                          attitude=self.sim.attitude,
                          error_estimate=None if self.failure is not None else self.error_estimate(),
                          failure=self.failure)
+
+
+def _holds(times: np.ndarray, t: float) -> bool:
+    """Whether sorted ``times`` hold ``t``."""
+    i = int(np.searchsorted(times, t))
+    return i < times.size and times[i] == t
 
 
 def _changes(sim: Simulator, commands: dict) -> bool:

@@ -347,13 +347,7 @@ class TickLoop:
     def _follow(self, common: np.ndarray) -> None:
         """The shadow run follows through the common breaks ``common`` (Runner._follow, none a check) in one call;
         its steps and the run's count for the error control."""
-        r = self.r
-        sim = r.sim
-        seg = sim._seg[1]  # (the run's segment of this chunk)
-        s_steps = self._follow_one(r.shadow, common)
-        r.control.note_method(seg[5], sim.steps - r._steps_seen, s_steps, exact=seg[4] and sim._free_axis != -1,
-                              stiff=seg[6] > sim.tau_min)
-        r._steps_seen = sim.steps
+        self.r.count_stretch(self._follow_one(self.r.shadow, common))  # (under the run's segment of this chunk)
 
     @staticmethod
     def _follow_one(sh, common: np.ndarray) -> int:

@@ -122,12 +122,7 @@ def nutation_angle(q: np.ndarray, L: np.ndarray) -> float:
     """θ (rad, 0…π): the angle between the body's polar axis x3 (q = (w, x, y, z): body → case) and L (case
     frame); 0 for L = 0. Scalar code (a region test calls it at every check)."""
     w, x, y, z = (float(v) for v in q)
-    a = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))  # x3 in the case frame
-    L0, L1, L2 = (float(v) for v in L)
-    if L0 == 0.0 and L1 == 0.0 and L2 == 0.0:
-        return 0.0
-    c0, c1, c2 = a[1] * L2 - a[2] * L1, a[2] * L0 - a[0] * L2, a[0] * L1 - a[1] * L0
-    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), a[0] * L0 + a[1] * L1 + a[2] * L2)
+    return _angle_one(_column(w, x, y, z, 2), tuple(float(v) for v in L))  # (x3 in the case frame; atan2(0, 0) = 0)
 
 
 def symmetry_axis(J) -> int:
@@ -203,7 +198,7 @@ def attitude_split_one(q1, q2, axis: int, L1, L2) -> tuple[float, float]:
     twist = abs((twist + math.pi) % (2.0 * math.pi) - math.pi)
     a1, a2 = _column(w1, x1, y1, z1, axis), _column(w2, x2, y2, z2, axis)
     l1, l2 = tuple(float(x) for x in L1), tuple(float(x) for x in L2)
-    th1, th2 = _angle_one(a1, l1), _angle_one(a2, l2)
+    th1, th2 = _angle_one(a1, l1), _angle_one(a2, l2)  # (the nutation angles about each L)
     n = max(math.sqrt(l2[0] * l2[0] + l2[1] * l2[1] + l2[2] * l2[2]), 1e-300)
     e = (l2[0] / n, l2[1] / n, l2[2] / n)
     d1, d2 = sum(a * b for a, b in zip(a1, e, strict=True)), sum(a * b for a, b in zip(a2, e, strict=True))

@@ -171,8 +171,6 @@ def slip_bound(scene, T: float) -> float:
     return field_rates(scene) + spin_reach(scene, T)
 
 
-
-
 # --------------------------------------------------------------------------------------------------
 # the attitude's tolerances: directions and spin phase
 # --------------------------------------------------------------------------------------------------
