@@ -1,35 +1,56 @@
-"""Packaging for gyro_sim, in the style of ros2/examples (ament_python).
+"""The parts of the build that pyproject.toml cannot say (PEP 621 metadata and dependencies are there).
 
-Works two ways:
-  * ``pip install .`` on a machine without ROS (the ROS 2 Python wheels are the
-    optional ``ros`` extra: ``pip install '.[ros]'``);
-  * ``colcon build`` in a ROS 2 workspace, where ``package.xml`` names the ROS deps.
+colcon's ament_python runs this file (``setup.py build install`` / ``setup.py develop``), pip runs it through the
+backend named in pyproject.toml. It adds, in the style of ros2/examples:
 
-The data_files put the ament index markers, the manifests, config/*.yaml and the launch file
-under ``<prefix>/share`` and the ``ros2 run`` executables under ``<prefix>/lib`` so ``ros2 run
-gyro_sim ...``, ``ros2 launch gyro_sim gyro_sim.launch.py`` and ``get_package_share_directory``
-work with either tool (with ``pip install -e``, ``gyro-sim ros-index`` lays them out:
-gyro_sim/ros/index.py).
+* data_files: the ament index markers, the manifests, config/*.yaml|json and the launch file under
+  ``<prefix>/share``, the ``ros2 run`` executables under ``<prefix>/lib`` (setup.cfg puts the console scripts
+  there too), so ``ros2 run gyro_sim ...``, ``ros2 launch gyro_sim gyro_sim.launch.py`` and
+  ``get_package_share_directory`` work with either tool (with ``pip install -e``, ``gyro-sim ros-index`` lays
+  them out: gyro_sim/ros/index.py);
+* the compile of the numba kernels into the package at build time (build_support/precompile_kernels.py): after
+  ``pip install .``, ``colcon build`` (plain or ``--symlink-install``) the first run compiles nothing.
 """
 from glob import glob
 import os
+import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.build_py import build_py
+from setuptools.command.develop import develop
 
-package_name = 'gyro_sim'
 # realpath: colcon build --symlink-install runs a symlink to this file from the build folder
 here = os.path.dirname(os.path.realpath(__file__))
+sys.path.insert(0, os.path.join(here, 'build_support'))
+from precompile_kernels import precompile  # noqa: E402  (build_support/precompile_kernels.py)
+
+package_name = 'gyro_sim'
+
+# colcon build --symlink-install runs `setup.py develop` in a build folder of links to setup.py, setup.cfg and the
+# packages, but not to pyproject.toml, where the metadata is: link it there too
+if not os.path.exists('pyproject.toml') and os.path.isfile(os.path.join(here, 'pyproject.toml')):
+    os.symlink(os.path.join(here, 'pyproject.toml'), 'pyproject.toml')
 
 
-def _read(name):
-    with open(os.path.join(here, name), encoding='utf-8') as f:
-        return f.read()
+class BuildPyWithKernels(build_py):
+    """build_py, then the kernels compiled into the built tree (their numba cache ships in the wheel)."""
+
+    def run(self):
+        super().run()
+        if not getattr(self, 'editable_mode', False):  # (an editable install compiles where the sources are)
+            precompile(os.path.abspath(self.build_lib))
+
+
+class DevelopWithKernels(develop):
+    """``setup.py develop`` (colcon build --symlink-install), then the kernels compiled next to the sources."""
+
+    def run(self):
+        super().run()
+        precompile(os.path.abspath(self.egg_path or os.getcwd()))
 
 
 setup(
-    name=package_name,
-    version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*']),
+    packages=find_packages(include=['gyro_sim', 'gyro_sim.*', 'gyro_ctl', 'gyro_ctl.*']),
     # PEP 561 markers: the packages' annotations are for their users' type checkers too
     package_data={'gyro_sim': ['py.typed'], 'gyro_ctl': ['py.typed']},
     data_files=[
@@ -44,86 +65,8 @@ setup(
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml')) + sorted(glob('config/*.json'))),
         ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
-    python_requires='>=3.10',
-    install_requires=[
-        'numpy>=1.24',
-        'scipy>=1.10',
-        'numba>=0.59',
-        'pyyaml>=6',
-        'pydantic>=2.5',
-        'matplotlib>=3.7',
-        'rosbags>=0.10',
-        'mcap>=1.1',
-    ],
-    extras_require={
-        # PyPI wheels of ROS 2 for machines without a ROS install. The lower bounds
-        # are the oldest wheels published (ROS 2 Jazzy); newer ones are Kilted.
-        'ros': [
-            'ros-rclpy>=7.1',
-            'ros-rmw-fastrtps-cpp>=8.4',
-            'ros-std-msgs>=5.3',
-            'ros-geometry-msgs>=5.3',
-            'ros-sensor-msgs>=5.3',
-            'ros-rosgraph-msgs>=2.0',
-            'ros-builtin-interfaces>=2.0',
-            'ros-diagnostic-msgs>=5.3',  # /diagnostics
-            'ros-std-srvs>=5.3',  # pause / resume / step / reset services
-        ],
-        # ros2/examples declare test deps as the 'test' extra (tests_require is gone
-        # from setuptools).
-        'test': [
-            'pytest>=7',
-            'hypothesis>=6',
-            'mpmath>=1.3',  # 50-digit reference values of [M] (2.13) in test_conductor
-            'mcap-ros2-support>=0.5',  # independent reader of recorded bags in test_recording
-            # `colcon build` of this package in test_packaging (colcon-ros: ament_python packages)
-            'colcon-core>=0.21',
-            'colcon-ros>=0.5',
-            'colcon-python-setup-py>=0.2.9',
-            'colcon-package-information>=0.4',  # `colcon list`
-            'websockets>=15',  # the test client of the live view (Foxglove WebSocket protocol; proxy=None needs 15)
-            # lint and types in CI (test/test_lint.py against test/lint_baseline.json; config in pyproject.toml).
-            # The findings depend on the versions: the baseline was made with ruff 0.17 and mypy 2.4.
-            'ruff>=0.17',
-            'mypy>=2.4',
-        ],
-        # RunResult.to_dataframe() / to_xarray() (gyro_sim/results.py)
-        'data': [
-            'pandas>=2.0',
-            'xarray>=2024.1',
-        ],
-        # `gyro-sim run SCENE --live`: the run served over the Foxglove WebSocket protocol
-        'live': [
-            'foxglove-sdk>=0.14',
-        ],
-        # the API reference (docs/api, `gyro-sim api-docs`)
-        'docs': [
-            'pdoc>=14',
-        ],
-        # `gyro-sim sweep` (gyro_sim/sweep.py): runs on a Dask cluster (local or by scheduler
-        # address), results as Parquet, progress bar. The core imports none of these.
-        'sweep': [
-            'dask[distributed]>=2024.8',
-            'pyarrow>=15',
-            'tqdm>=4.66',
-        ],
-    },
-    # numba's on-disk cache (cache=True) writes next to the modules: never zipped.
+    python_requires='>=3.10',  # (pyproject.toml: dynamic, for colcon)
+    # numba's on-disk cache (cache=True) is next to the modules: never zipped
     zip_safe=False,
-    maintainer='gyro_sim maintainers',
-    maintainer_email='maintainers@example.com',
-    description='Simulator of an electrodynamically controlled gyroscope (ROS 2, Python).',
-    long_description=_read('README.md'),
-    long_description_content_type='text/markdown',
-    license='Apache-2.0',
-    license_files=['LICENSE'],
-    entry_points={
-        'console_scripts': [
-            'gyro-sim = gyro_sim.apps.cli:main',
-            'gyro-sim-simulator = gyro_sim.ros.simulator_node:main',
-            'gyro-ctl-controller = gyro_ctl.ros.controller_node:main',
-        ],
-        # the gyro_bench fixture for a user's own tests of a controller (gyro_sim/apps/testing.py)
-        'pytest11': ['gyro_sim = gyro_sim.apps.testing'],
-    },
+    cmdclass={'build_py': BuildPyWithKernels, 'develop': DevelopWithKernels},
 )

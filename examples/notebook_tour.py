@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 import gyro_sim
-from gyro_sim.plotting import plot_run
-from gyro_sim.recording import record_result
+from gyro_sim.io.plotting import plot_run
+from gyro_sim.io.recording import record_result
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "runs/tour")
 out.mkdir(parents=True, exist_ok=True)

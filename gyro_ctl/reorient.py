@@ -293,11 +293,11 @@ def reorient(x, p: ReorientParams) -> dict:
 
 
 def scene_constants(scene, stators: Sequence[str] = ("z1", "z2", "z3")) -> dict:
-    """``inertia``, ``k_e`` and ``coil_constants`` of a scene (gyro_sim.scene.Scene), for ReorientParams.
+    """``inertia``, ``k_e`` and ``coil_constants`` of a scene (gyro_sim.scenes.scene.Scene), for ReorientParams.
 
     k_e = 2π r2³ τ_eff/μ0 of the rotor's conductor (the quasi-static coefficient of [K] (1.2)).
     """
-    from gyro_sim.conductor import conductor_model
+    from gyro_sim.physics.conductor import conductor_model
 
     cond = scene.rotor.conductor
     model = conductor_model(cond.kind, cond.outer_radius, cond.conductivity, thickness=cond.thickness)  # (k_e: any N)

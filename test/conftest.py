@@ -2,6 +2,9 @@
 property-based tests of test/test_fuzz_limits.py with thousands of examples (default: a few hundred in all)."""
 import pytest
 
+# the gyro_bench fixture (gyro_sim's pytest plugin is opt-in: gyro_sim/testing.py)
+pytest_plugins = ["gyro_sim.testing"]
+
 
 def pytest_addoption(parser):
     parser.addoption("--stress", action="store_true", default=False, help="also run the long (slow) stress tests")

@@ -39,8 +39,8 @@ import time
 import rclpy
 from rclpy.node import Node
 
-from gyro_sim.messages import (TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS,
-                               TOPIC_STATUS, TOPICS, node_topic)
+from gyro_sim.io.messages import (TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_KINETIC_MOMENT, TOPIC_SCENE,
+                                  TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS, node_topic)
 from gyro_sim.ros.common import message_class, qos_profile
 
 

@@ -21,8 +21,8 @@ CHECKPOINTS = 8
 def scene_result(name: str) -> dict:
     """The run of built-in scene ``name`` as shipped, at :data:`CHECKPOINTS` instants: t (s), L (N m s, case
     frame), q (body → case, scalar first) where the run integrates the attitude, and the stated accuracy."""
-    from gyro_sim.scene import load_scene
-    from gyro_sim.simulate import run
+    from gyro_sim.scenes.scene import load_scene
+    from gyro_sim.engine.simulate import run
 
     scene = load_scene(name)
     with warnings.catch_warnings():
@@ -45,7 +45,7 @@ def attitude_angle(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
 
 
 def main() -> int:
-    from gyro_sim.scene import builtin_scenes
+    from gyro_sim.scenes.scene import builtin_scenes
 
     out = {name: scene_result(name) for name in builtin_scenes()}
     RECORD.write_text(json.dumps(out, indent=1) + "\n")

@@ -28,7 +28,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from gyro_sim import cli
+from gyro_sim.apps import cli
 from gyro_sim.io.bag_format import RESERVE_NAME
 from gyro_sim.io.bag_repair import recover_bag
 from gyro_sim.io.recording import BagRecorder, bag_info, read_bag, record_result, scene_text

@@ -12,11 +12,11 @@ import numpy as np
 from gyro_sim.physics.frames import attitude_split, symmetry_axis
 import pytest
 
-from gyro_sim.accuracy import AccuracyWarning, choose_modes, mode_plan, modal_error
-from gyro_sim.conductor import g_shell, g_solid_sphere, modal_shell
-from gyro_sim.constants import MU0
-from gyro_sim.scene import SceneError, load_scene, scene_from_dict
-from gyro_sim.simulate import Simulator, run
+from gyro_sim.scenes.accuracy import AccuracyWarning, choose_modes, mode_plan, modal_error
+from gyro_sim.physics.conductor import g_shell, g_solid_sphere, modal_shell
+from gyro_sim.physics.constants import MU0
+from gyro_sim.scenes.scene import SceneError, load_scene, scene_from_dict
+from gyro_sim.engine.simulate import Simulator, run
 
 A, SIG, B0 = 0.025, 2.5e7, 2e-3
 RHO = 0.7  # r1/r2 of the thick shell
@@ -140,7 +140,7 @@ def test_accuracy_section_is_validated(acc, msg):
 def test_error_control_decides_alike_whatever_the_breaks():
     """The error control checks at fixed instants that are breaks of every run: an in-process run and one whose
     samples are breaks (as the ROS node runs) change their step alike and give the same bits and estimate."""
-    from gyro_sim.simulate import Runner, drive
+    from gyro_sim.engine.simulate import Runner, drive
 
     s = load_scene("spinup_thin_shell", overrides={"duration": 4.0})
     runs = []
@@ -157,8 +157,8 @@ def test_error_control_decides_alike_whatever_the_breaks():
 
 
 def test_estimate_is_reported_everywhere(tmp_path):
-    from gyro_sim.cli import format_summary
-    from gyro_sim.recording import bag_info, record_run
+    from gyro_sim.apps.cli import format_summary
+    from gyro_sim.io.recording import bag_info, record_run
 
     s = load_scene("nutation_oblate", overrides={"duration": 0.2})
     r = record_run(s, tmp_path / "bag")
@@ -168,7 +168,7 @@ def test_estimate_is_reported_everywhere(tmp_path):
     assert summ["error_L"] == est.L and summ["error_attitude"] == est.attitude and summ["accuracy_met"] is True
     assert "estimated error" in format_summary("x", summ)
     custom = bag_info(tmp_path / "bag")["custom"]
-    from gyro_sim.accuracy import ErrorEstimate
+    from gyro_sim.scenes.accuracy import ErrorEstimate
 
     assert ErrorEstimate.from_json(str(custom["gyro_sim.error_estimate"])) == est
     print(f"\nestimate: {est.text()}")

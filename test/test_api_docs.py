@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from gyro_sim import cli
+from gyro_sim.apps import cli
 
 pytest.importorskip("pdoc", reason="the 'docs' extra (pdoc) builds the API reference")
 
@@ -32,7 +32,7 @@ PUBLIC = {
 @pytest.fixture(scope="module")
 def built(tmp_path_factory):
     out = tmp_path_factory.mktemp("api") / "api"
-    from gyro_sim.api_docs import build
+    from gyro_sim.apps.api_docs import build
 
     return build(out)
 
@@ -60,7 +60,7 @@ def test_every_module_has_its_page(built):
 
 def test_pdoc_warnings_are_caught(tmp_path, monkeypatch):
     """The check above can fail: a package whose __all__ names something that does not exist is reported."""
-    from gyro_sim.api_docs import build
+    from gyro_sim.apps.api_docs import build
 
     pkg = tmp_path / "src" / "brokenpkg"
     pkg.mkdir(parents=True)
@@ -76,7 +76,8 @@ def test_modules_needing_a_missing_extra_are_left_out(tmp_path):
     site = tmp_path / "site"
     site.mkdir()
     (site / "sitecustomize.py").write_text("import sys\nsys.modules['rclpy'] = None\n")
-    code = ("import json, sys; from gyro_sim.api_docs import build; d = build(sys.argv[1], packages=('gyro_ctl',)); "
+    code = ("import json, sys; from gyro_sim.apps.api_docs import build; "
+            "d = build(sys.argv[1], packages=('gyro_ctl',)); "
             "print(json.dumps({'modules': d.modules, 'skipped': d.skipped, 'warnings': d.warnings}))")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), str(ROOT)]))
     p = subprocess.run([sys.executable, "-c", code, str(tmp_path / "out")], capture_output=True, text=True,
@@ -92,7 +93,7 @@ def test_modules_needing_a_missing_extra_are_left_out(tmp_path):
 
 def test_api_docs_command(tmp_path, capsys, monkeypatch):
     """The command wraps build(): one line naming the index (the build itself is the fixture's; stubbed here)."""
-    from gyro_sim import api_docs
+    from gyro_sim.apps import api_docs
 
     def fake_build(out):
         (out / "index.html").parent.mkdir(parents=True)

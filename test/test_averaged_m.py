@@ -1,4 +1,4 @@
-"""Checks of gyro_sim.averaged_m: [M] (3.6), (3.14), (3.17) against an independent average of the
+"""Checks of gyro_sim.averaging.averaged_m: [M] (3.6), (3.14), (3.17) against an independent average of the
 instantaneous torque, the small-θ closed forms (3.10)–(3.12), (3.15), (3.18)–(3.20), the first
 integral (3.7), and the full (unaveraged) model, with the error measured as a function of μ.
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from gyro_sim import load_scene, run
-from gyro_sim.averaged_m import (
+from gyro_sim.averaging.averaged_m import (
     MU_MAX,
     ConstantFieldM,
     PulsatingFieldM,
@@ -25,12 +25,12 @@ from gyro_sim.averaged_m import (
     thin_shell_l_star,
     torus_average_rates,
 )
-from gyro_sim.closed_forms import (
+from gyro_sim.physics.closed_forms import (
     constant_field_transverse_decay_rate,
     thin_shell_nutation_window,
     torque_slip,
 )
-from gyro_sim.scene import SceneError
+from gyro_sim.scenes.scene import SceneError
 
 J1 = 5.592e-6  # kg·m², the scenes' equatorial moment
 J3 = 6.7e-6  # kg·m², oblate: κ = 0.198

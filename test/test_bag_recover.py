@@ -35,10 +35,10 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
 import gyro_sim
-import gyro_sim.messages
-from gyro_sim import cli
-from gyro_sim.bag_repair import NOT_CLOSED, RecoverError, mcap_closed, not_closed, recover_bag
-from gyro_sim.recording import read_bag, record_result, scene_text
+import gyro_sim.io.messages
+from gyro_sim.apps import cli
+from gyro_sim.io.bag_repair import NOT_CLOSED, RecoverError, mcap_closed, not_closed, recover_bag
+from gyro_sim.io.recording import read_bag, record_result, scene_text
 
 SCENE = "spinup_thin_shell"
 
@@ -358,7 +358,7 @@ def test_bag_directory_renamed_since_it_was_recorded(complete, tmp_path):
 
 def test_the_bag_file_exists_at_every_instant(complete, tmp_path, monkeypatch):
     """While the recovered file is put in place, BAG/run.mcap always exists (the old one, then the new one)."""
-    from gyro_sim import bag_repair
+    from gyro_sim.io import bag_repair
 
     bag = crashed_copy(complete, tmp_path, complete["layout"]["chunks"][1]["end"])
     seen = []
@@ -377,7 +377,7 @@ def test_the_bag_file_exists_at_every_instant(complete, tmp_path, monkeypatch):
 
 def test_without_hard_links_the_original_is_renamed(complete, tmp_path, monkeypatch):
     """A file system without hard links: the damaged original is renamed aside instead (same result)."""
-    from gyro_sim import bag_repair
+    from gyro_sim.io import bag_repair
 
     def no_link(src, dst):
         raise OSError(1, "Operation not permitted (simulated: no hard links here)")
@@ -470,7 +470,7 @@ def test_recovered_run_re_simulates_bit_for_bit(complete, tmp_path, capsys):
 
     def ends_on_a_whole_sample(cut):
         msgs = expected_messages(lay, cut)
-        return set(gyro_sim.messages.STATE_TOPICS) <= {t for t, ns, _ in msgs if ns == msgs[-1][1]}
+        return set(gyro_sim.io.messages.STATE_TOPICS) <= {t for t, ns, _ in msgs if ns == msgs[-1][1]}
     # (the recorder writes its first chunk out with the first sample, at t = 0: a chunk after it)
     whole = [c["end"] for c in lay["chunks"][:-1]
              if ends_on_a_whole_sample(c["end"]) and expected_messages(lay, c["end"])[-1][1] > 0]
@@ -559,7 +559,7 @@ def test_read_only_parent_leaves_everything(complete, tmp_path, capsys):
 @pytest.mark.parametrize("step", ["verify", "install_mcap", "install_yaml"])
 def test_a_failure_at_any_step_leaves_the_bag_as_it_was(complete, tmp_path, monkeypatch, capsys, step):
     """A failure while checking the new bag or while putting it in place: every move undone, no temp left."""
-    from gyro_sim import bag_repair
+    from gyro_sim.io import bag_repair
 
     bag = crashed_copy(complete, tmp_path, complete["layout"]["chunks"][1]["end"] + 3, keep_yaml=True)
     (bag / "metadata.yaml").write_text("an early, half-written metadata.yaml\n")
@@ -588,7 +588,7 @@ def test_a_failure_at_any_step_leaves_the_bag_as_it_was(complete, tmp_path, monk
 
 CHILD = """
 import sys
-from gyro_sim.recording import BagRecorder
+from gyro_sim.io.recording import BagRecorder
 names = ["z1", "z2", "z3"]
 with BagRecorder(sys.argv[1], "name: killed\\nx: 1\\n", "killed") as rec:
     i = 0

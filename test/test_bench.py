@@ -1,4 +1,4 @@
-"""The work-precision benchmark (gyro_sim.bench): its NumPy baseline is the compiled model, and it
+"""The work-precision benchmark (gyro_sim.apps.bench): its NumPy baseline is the compiled model, and it
 writes its three files with sane contents."""
 from __future__ import annotations
 
@@ -8,10 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from gyro_sim import bench_baseline, kernels, load_scene
-from gyro_sim.bench import (RK4_METHOD, BenchConfig, Results, Row, bench_main, cost_at_error, final_error,
+from gyro_sim import load_scene
+
+from gyro_sim.apps import bench_baseline
+
+from gyro_sim.compiled import kernels
+from gyro_sim.apps.bench import (RK4_METHOD, BenchConfig, Results, Row, bench_main, cost_at_error, final_error,
                             numpy_rhs, run_baseline, run_bench, run_ours, savings)
-from gyro_sim.simulate import Simulator, run
+from gyro_sim.engine.simulate import Simulator, run
 
 SCENES = [
     ("spinup_thin_shell", {}),
@@ -217,8 +221,8 @@ def test_bench_smoke(tmp_path):
 def test_ticks_part_times_both_loops_on_the_same_runs():
     """The per-tick part (quick): each case with the compiled ticks and the Python break loop (the same run: the
     same steps), the default scenes also without controller; ratios are CPU ratios of this run; bench.md's table."""
-    from gyro_sim.bench import markdown
-    from gyro_sim.bench_ticks import CASES, ticks_part
+    from gyro_sim.apps.bench import markdown
+    from gyro_sim.apps.bench_ticks import CASES, ticks_part
 
     res = Results(BenchConfig(mode="quick", min_wall=0.0, max_reps=1))
     ticks_part(res, quick=True)
@@ -239,8 +243,8 @@ def test_output_rate_part_rows_against_the_50_hz_run(monkeypatch):
     """The output-rate rows (issue 23): each rate as shipped and with the accuracy of L alone, its CPU over the 50 Hz
     run's of the same accuracy, the samples the rate asks for, a sample a stop (never fewer steps than samples at
     10 kHz); bench.md's table. (Over 0.2 s here: the part's own 2 s / 10 s are the benchmark's.)"""
-    from gyro_sim import bench_ticks
-    from gyro_sim.bench import markdown
+    from gyro_sim.apps import bench_ticks
+    from gyro_sim.apps.bench import markdown
 
     monkeypatch.setitem(bench_ticks.OUTPUT_RATE_DURATION, "quick", 0.2)
     res = Results(BenchConfig(mode="quick", min_wall=0.0, max_reps=1))
@@ -277,7 +281,7 @@ def test_bench_ros_part_measures_the_node_path(tmp_path):
     """The ros part's pieces on short runs: a first run cold then warm (the warm process compiles nothing), lockstep
     over DDS with every tick answered and its figures parsed, real time with the latency distribution."""
     pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
-    from gyro_sim import bench_ros
+    from gyro_sim.apps import bench_ros
 
     cold, warm = bench_ros.first_run("free_rotor", tmp_path)[:2]
     print(f"\n  first run of free_rotor: cold {cold['process_wall']:.2f} s (compile {cold['compile']:.2f} s), "
@@ -295,7 +299,7 @@ def test_bench_ros_part_measures_the_node_path(tmp_path):
 def test_accuracy_part_smoke(tmp_path):
     """The accuracy part (gyro_sim/bench_accuracy.py) on two short scenes: every row has an achieved error and an
     estimate, the shipped scene meets its accuracy, the tables and accuracy.csv are written."""
-    from gyro_sim.bench_accuracy import accuracy_part
+    from gyro_sim.apps.bench_accuracy import accuracy_part
 
     cfg = BenchConfig(mode="quick", only="accuracy", accuracy_scenes=("free_rotor", "nutation_oblate"))
     res = run_bench(cfg, tmp_path, command="smoke")
@@ -319,7 +323,7 @@ def test_baseline_sweep_stops_at_the_reference_floor(monkeypatch):
     took 37 754 steps at every rtol, 10 s each, error 6.1e-9 = the agreement) is not swept to tighter rtols: the
     rows would measure the reference. Here a stand-in baseline 1e-9 off the reference at every rtol: one row per
     method, and a note (before: all eight rtols each)."""
-    from gyro_sim import bench
+    from gyro_sim.apps import bench
 
     ref = bench.run_ours("spinup_thin_shell", 0.01, 3072, "full/lawson8")
     calls = []
@@ -347,7 +351,7 @@ def test_startup_and_sweep_parts(tmp_path):
     headline sentences are written."""
     from pathlib import Path
 
-    from gyro_sim import bench_scaling
+    from gyro_sim.apps import bench_scaling
 
     repo = Path(__file__).resolve().parents[1]
     res = type("R", (), {"startup": [], "sweep": []})()

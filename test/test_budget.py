@@ -26,7 +26,7 @@ from gyro_sim.io.bag_reader import bag_info, read_bag
 from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.scenes.step_control import STEP_BUDGET, StepBudgetError
 
-GYRO_SIM = [sys.executable, "-m", "gyro_sim.cli"]
+GYRO_SIM = [sys.executable, "-m", "gyro_sim.apps.cli"]
 #: wall s from SIGINT to the end of the process, summary of the bag and its plot included (a loaded machine; the
 #: goal is 2 s idle: measured 0.04-0.06 s to the interrupt in-process, 2.2 s to the CLI's exit with its summary)
 SIGINT_BOUND = 10.0

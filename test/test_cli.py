@@ -1,6 +1,6 @@
 """The gyro-sim command and the run plot, against a fake scene loader and simulator.
 
-The fakes stand in for gyro_sim.scene and gyro_sim.simulate (monkeypatched into
+The fakes stand in for gyro_sim.scenes.scene and gyro_sim.engine.simulate (monkeypatched into
 sys.modules and onto the gyro_sim package), so these tests say what the CLI does
 with any implementation of that interface.
 """
@@ -18,7 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyro_sim import cli, plotting
+from gyro_sim.apps import cli
+
+from gyro_sim.io import plotting
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -101,7 +103,7 @@ SCENES = {
 
 @pytest.fixture
 def fakes(monkeypatch, tmp_path):
-    """Install fake gyro_sim.scene / gyro_sim.simulate; record the calls made."""
+    """Install fake gyro_sim.scenes.scene / gyro_sim.engine.simulate; record the calls made."""
     calls = {"load": [], "run": []}
     scene_mod = types.ModuleType("gyro_sim.scenes.scene")  # (the homes the cli imports from; issue 22)
     sim_mod = types.ModuleType("gyro_sim.engine.simulate")
@@ -273,7 +275,7 @@ def test_scenes_reports_a_broken_scene_and_exits_2(fakes, monkeypatch, tmp_path,
 # --- the console script -----------------------------------------------------
 
 def test_module_help_runs_in_a_fresh_interpreter():
-    proc = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "--help"],
+    proc = subprocess.run([sys.executable, "-m", "gyro_sim.apps.cli", "--help"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert "usage: gyro-sim" in proc.stdout
@@ -327,8 +329,8 @@ def test_decimation_leaves_short_series_alone():
 # --- the real modules, once they exist --------------------------------------
 
 def test_real_scene_and_simulate_modules_offer_what_the_cli_uses():
-    scene = pytest.importorskip("gyro_sim.scene")
-    simulate = pytest.importorskip("gyro_sim.simulate")
+    scene = pytest.importorskip("gyro_sim.scenes.scene")
+    simulate = pytest.importorskip("gyro_sim.engine.simulate")
     assert issubclass(scene.SceneError, Exception)
     assert callable(scene.load_scene) and callable(scene.builtin_scenes)
     assert callable(simulate.run)

@@ -1,4 +1,4 @@
-"""Self-checks of gyro_sim.closed_forms (each test prints the error it measured).
+"""Self-checks of gyro_sim.physics.closed_forms (each test prints the error it measured).
 
 Run from the repo root: python -m pytest -q test/test_closed_forms.py -s
 """
@@ -9,7 +9,7 @@ import pytest
 from scipy.integrate import cumulative_trapezoid, solve_ivp
 from scipy.optimize import brentq
 
-from gyro_sim.closed_forms import (
+from gyro_sim.physics.closed_forms import (
     averaged_nutation_rate,
     constant_field_transverse_decay_rate,
     euler_angles,
@@ -24,7 +24,7 @@ from gyro_sim.closed_forms import (
     torque_slip,
     torque_slip_thin_shell,
 )
-from gyro_sim.constants import MU0
+from gyro_sim.physics.constants import MU0
 
 
 # ----------------------------------------------------------------------------------

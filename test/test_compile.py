@@ -13,7 +13,8 @@ import sys
 
 SIGNATURES = """
 import inspect, json, gyro_sim
-from gyro_sim import frozen_flow, kernels
+from gyro_sim.compiled import frozen_flow
+from gyro_sim.compiled import kernels
 gyro_sim.run(gyro_sim.load_scene("spinup_thin_shell"), duration=0.2)
 gyro_sim.run(gyro_sim.load_scene("spinup_thin_shell"), duration=0.2, attitude=True)
 case = lambda f: list(inspect.signature(f.py_func).parameters).index("case")  # (the steppers' pos, max_steps follow)
@@ -36,7 +37,7 @@ def test_default_scene_compiles_each_kernel_once_and_no_case_frame_code():
 
 def _run_cli(args, cache_dir):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
-    return subprocess.run([sys.executable, "-m", "gyro_sim.cli", *args], env=env, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "gyro_sim.apps.cli", *args], env=env, capture_output=True, text=True,
                           timeout=900)
 
 
@@ -79,7 +80,7 @@ def read_only(self):
 
 
 caching.InTreeCacheLocator.ensure_cache_path = read_only  # as root every directory is writable: simulate it
-from gyro_sim.cli import main
+from gyro_sim.apps.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 

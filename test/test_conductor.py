@@ -1,4 +1,4 @@
-"""Tests of gyro_sim.conductor against the closed forms of [M] (physics.md section 6, item 1).
+"""Tests of gyro_sim.physics.conductor against the closed forms of [M] (physics.md section 6, item 1).
 
 Every test prints the error it measured and asserts it against a stated tolerance.
 Units: sigma = 1/mu0 and r2 = 1 m, so omega (rad/s) equals the dimensionless
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.special import spherical_jn, spherical_yn
 
-from gyro_sim.conductor import (
+from gyro_sim.physics.conductor import (
     ModalModel,
     alpha_shell,
     conductor_model,
@@ -21,7 +21,7 @@ from gyro_sim.conductor import (
     shell_pole_wavenumbers,
     shell_tau_eff,
 )
-from gyro_sim.constants import MU0
+from gyro_sim.physics.constants import MU0
 
 SIG = 1.0 / MU0  # mu0 sigma = 1 s/m^2
 X = np.logspace(-2, 3, 501)  # omega mu0 sigma a^2 grid of physics.md
@@ -316,7 +316,7 @@ def test_low_frequency_tau_eff():
         print(f"\n{name}: |g/(i w tau_eff) - 1| at w=1e-7: {e:.1e} (tol 1e-7)")
         assert e < 1e-7
     # the k^2 coefficient of the series of (2.13) equals the closed form (r2^5 - r1^5)/(15 r2^3)
-    from gyro_sim.conductor import _shell_g_coeffs
+    from gyro_sim.physics.conductor import _shell_g_coeffs
     eg = max(abs(_shell_g_coeffs(rho, 2)[0] / ((1 - rho ** 5) / 15) - 1)
              for rho in (0.0, 0.3, 0.5, 0.9, 0.999))
     print(f"series of (2.13): G1 vs (1 - rho^5)/15: max rel err {eg:.1e} (tol 1e-12)")

@@ -6,7 +6,7 @@ import pytest
 
 import gyro_sim
 from gyro_ctl.laws import make_law, make_switching
-from gyro_sim.simulate import Runner
+from gyro_sim.engine.simulate import Runner
 
 PREC = 2 * math.pi / 204.0  # precession period of nutation_oblate, s (|L|/J1 ≈ 204 rad/s)
 

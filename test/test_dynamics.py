@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from gyro_sim import kernels
-from gyro_sim.conductor import g_solid_sphere, g_thin_shell
-from gyro_sim.scene import scene_from_dict
-from gyro_sim.simulate import Simulator, run
+from gyro_sim.compiled import kernels
+from gyro_sim.physics.conductor import g_solid_sphere, g_thin_shell
+from gyro_sim.scenes.scene import scene_from_dict
+from gyro_sim.engine.simulate import Simulator, run
 
 SHELL = {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}
 SPHERE = {"kind": "solid_sphere", "outer_radius": 0.025, "conductivity": 2.5e7}
@@ -48,7 +48,7 @@ def test_K13_mean_torque_from_instantaneous_torque():
                                sim.tail, 0, F, np.zeros(25), sim.eff)
         acc += F[0:3]
     mean = acc / n
-    from gyro_sim.frames import quat_to_matrix
+    from gyro_sim.physics.frames import quat_to_matrix
 
     R = quat_to_matrix(sim.y[3:7])
     Omega = R @ (sim.Jinv * (R.T @ sim.y[0:3]))
@@ -63,7 +63,7 @@ def test_K13_mean_torque_from_instantaneous_torque():
 ])
 def test_torque_slip_curve(conductor, g, slips):
     """Steady torque on a rotor held at spin Ω in a field rotating at ν: N = (2π r2³/μ0) B0² Im ĝ(ν − Ω)."""
-    from gyro_sim.conductor import conductor_model
+    from gyro_sim.physics.conductor import conductor_model
 
     m = conductor_model(conductor["kind"], 0.025, 2.5e7, thickness=conductor.get("thickness"), n_modes=20)
     tau1 = float(m.tau[0])
@@ -84,7 +84,7 @@ def test_torque_slip_curve(conductor, g, slips):
 
 def test_thin_shell_pull_out_torque():
     """The thin shell's torque-slip curve peaks at slip 1/τ with N_max = (2π r2³/μ0) B0²/2."""
-    from gyro_sim.conductor import modal_thin_shell
+    from gyro_sim.physics.conductor import modal_thin_shell
 
     m = modal_thin_shell(0.025, 0.001, 2.5e7)
     tau = float(m.tau[0])
@@ -191,14 +191,14 @@ def test_stiff_modes_do_not_shrink_the_step():
         r = run(scene_from_dict({**base, "modes": n}))
         steps[n] = r.steps
         assert np.all(np.isfinite(r.modes))
-    from gyro_sim.conductor import conductor_model
+    from gyro_sim.physics.conductor import conductor_model
 
     m = conductor_model("solid_sphere", 0.025, 2.5e7, n_modes=50)
     expect = m.moment_scale * 1e-6 * float(np.imag(g_solid_sphere(5000.0, 0.025, 2.5e7)))
     err = abs(r.torque[-1, 2] - expect) / expect
     print(f"  steps: 1 mode {steps[1]}, 50 modes {steps[50]}; ω μ0 σ a² = {5000 * 4e-7 * math.pi * 2.5e7 * 0.025**2:.0f}")
     assert steps[1] == steps[50]
-    from gyro_sim.simulate import Simulator
+    from gyro_sim.engine.simulate import Simulator
 
     # auto: ETDRK4 where frozen_flow does not apply (triaxial rotor); on this isotropic heavy rotor the
     # frozen-flow step (bounded by the torque, not by the field's turns) is far longer: frozen_flow
@@ -231,7 +231,7 @@ def test_commands_keep_field_phase_continuous():
 def test_M319_nutation_grows_early_in_thin_shell_spinup():
     """[M] (3.18)–(3.20): with ωτ = 3 > 1 and κ = 0.5 the nutation angle of a thin shell grows while
     |L| < J1 l1 and decays above; θ(t) follows ln θ0 + ∫ (3.18) dt along the simulated |L|(t)."""
-    from gyro_sim.closed_forms import thin_shell_nutation_window, thin_shell_small_theta_nutation_rate
+    from gyro_sim.physics.closed_forms import thin_shell_nutation_window, thin_shell_small_theta_nutation_rate
     from scipy.integrate import cumulative_trapezoid
 
     J1 = J_SHELL
@@ -271,7 +271,7 @@ def test_field_step_is_excluded_at_first():
               commands=[{"time": 0.05, "stator": "z1", "current": 0.5}], duration=0.1, output={"rate": 1000.0})
     sim = Simulator(s)
     B0 = sim.field_now()
-    from gyro_sim.frames import quat_to_matrix
+    from gyro_sim.physics.frames import quat_to_matrix
 
     Bb = quat_to_matrix(sim.y[3:7]).T @ B0
     err0 = np.max(np.abs(sim.y[7:].reshape(-1, 3) + Bb))

@@ -10,8 +10,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from gyro_sim import cli, extras
-from gyro_sim import sweep as sweep_mod
+from gyro_sim.apps import cli
+
+from gyro_sim.common import extras
+from gyro_sim.apps import sweep as sweep_mod
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,12 +39,10 @@ def test_require_names_the_extra(monkeypatch):
     extras.require("data", "RunResult.to_xarray()", ("xarray",))  # (installed here: no error)
 
 
-def test_every_extra_of_setup_py_is_known():
-    import ast
+def test_every_extra_of_the_package_is_known():
+    from test_packaging import pyproject
 
-    call = next(n for n in ast.walk(ast.parse((ROOT / "setup.py").read_text())) if isinstance(n, ast.Call)
-                and getattr(n.func, "id", "") == "setup")
-    declared = set(ast.literal_eval(next(k.value for k in call.keywords if k.arg == "extras_require")))
+    declared = set(pyproject()["project"]["optional-dependencies"])
     assert declared - {"test"} == set(extras.EXTRAS)
     assert extras.extra_of("rcl_interfaces") == "ros" and extras.extra_of("numpy") is None
 
@@ -142,7 +142,7 @@ def closed_pipe_run(argv, unbuffered):
     r, w = os.pipe()
     os.close(r)
     try:
-        return subprocess.run([sys.executable, "-m", "gyro_sim.cli", *argv], stdout=w, stderr=subprocess.PIPE,
+        return subprocess.run([sys.executable, "-m", "gyro_sim.apps.cli", *argv], stdout=w, stderr=subprocess.PIPE,
                               text=True, timeout=300, cwd=ROOT, env=env)
     finally:
         os.close(w)
@@ -169,7 +169,7 @@ def test_help_into_a_closed_pipe_is_quiet(argv, unbuffered):
 
 
 def test_a_pipe_read_to_its_end_is_status_0():
-    p = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "scenes"], capture_output=True, text=True,
+    p = subprocess.run([sys.executable, "-m", "gyro_sim.apps.cli", "scenes"], capture_output=True, text=True,
                        timeout=300, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert p.returncode == 0 and p.stderr == "" and "spinup_thin_shell" in p.stdout
 
@@ -177,7 +177,8 @@ def test_a_pipe_read_to_its_end_is_status_0():
 # --- gyro-sim info ----------------------------------------------------------------------------------------
 
 def bag_info(**custom):
-    """What gyro_sim.recording.bag_info returns for a recorded in-process run (custom_data as the recorder writes)."""
+    """What gyro_sim.io.recording.bag_info returns for a recorded in-process run (custom_data as the recorder
+    writes)."""
     base = {"gyro_sim.scene_name": "free_rotor", "gyro_sim.version": "0.1.0", "gyro_sim.end": "complete",
             "gyro_sim.scene": "name: free_rotor\n", "gyro_sim.duration": "0.1", "gyro_sim.planned_duration": "0.1",
             "gyro_sim.wall_time": "0.40716126800009533", "gyro_sim.compile_time": "9.97845357899996",
@@ -225,7 +226,7 @@ def test_info_prints_readable_numbers():
 
 def test_info_of_a_recorded_bag(tmp_path, capsys):
     import gyro_sim
-    from gyro_sim.recording import record_run
+    from gyro_sim.io.recording import record_run
 
     record_run(gyro_sim.load_scene("free_rotor"), tmp_path / "bag", duration=0.05)
     assert cli.main(["info", str(tmp_path / "bag")]) == 0

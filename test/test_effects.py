@@ -1,4 +1,4 @@
-"""The effects plumbing (gyro_sim.effects): validation, off = no cost, the gyrostat kinematics, and bags.
+"""The effects plumbing (gyro_sim.compiled.effects): validation, off = no cost, the gyrostat kinematics, and bags.
 
 The physics of each effect against its paper is tested in test_magnetizable, test_flywheel and test_klt.
 """
@@ -10,9 +10,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 import gyro_sim
-from gyro_sim import effects
-from gyro_sim.recording import record_result
-from gyro_sim.scene import SceneError, scene_from_dict
+from gyro_sim.compiled import effects
+from gyro_sim.io.recording import record_result
+from gyro_sim.scenes.scene import SceneError, scene_from_dict
 
 BASE = dict(rotor=dict(inertia=[1.0e-5, 1.2e-5, 1.5e-5]), torque_model="none", duration=0.4,
             output=dict(rate=50.0), initial=dict(spin=50.0, theta=0.1))

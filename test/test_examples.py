@@ -14,9 +14,9 @@ import pytest
 pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
 
 import gyro_sim  # noqa: E402
-from gyro_sim.messages import QOS, TOPICS, node_topic, stamp_ns  # noqa: E402
-from gyro_sim.recording import read_bag  # noqa: E402
-from gyro_sim.rerun import rerun_bag  # noqa: E402
+from gyro_sim.io.messages import QOS, TOPICS, node_topic, stamp_ns  # noqa: E402
+from gyro_sim.io.recording import read_bag  # noqa: E402
+from gyro_sim.io.rerun import rerun_bag  # noqa: E402
 from test_ros import ROOT, finish, ros  # noqa: E402,F401  (ros: the fixture)
 
 pytestmark = pytest.mark.ros

@@ -1,10 +1,10 @@
-"""Fault injection (gyro_sim.faults): reproducible from a seed, statistics as asked, nothing when off."""
+"""Fault injection (gyro_sim.engine.faults): reproducible from a seed, statistics as asked, nothing when off."""
 import math
 
 import numpy as np
 import pytest
 
-from gyro_sim.faults import FaultConfig, Faults
+from gyro_sim.engine.faults import FaultConfig, Faults
 
 CMD = (["z1", "z2", "z3"], [0.3, 0.0, 0.5], None, 0)
 

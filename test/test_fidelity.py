@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import gyro_sim
-from gyro_sim.fidelity import spinup_model
+from gyro_sim.engine.fidelity import spinup_model
 
 
 #: the averaged models enter where their ε ≤ accuracy.rtol / fidelity.AVERAGED_ERROR (and ≤ MU_MAX = 1e-3): these
@@ -89,7 +89,7 @@ def test_averaged_twenty_minute_spinup_costs_milliseconds():
 
 
 def _slow_errors(full, hy):
-    from gyro_sim.averaged_m import slow_variables
+    from gyro_sim.averaging.averaged_m import slow_variables
 
     sf, sh = slow_variables(full), slow_variables(hy)
     L0 = max(sf["L"][0], sf["L"][-1])
@@ -130,7 +130,7 @@ def test_averaged_fidelity_takes_m_model_or_names_both_reasons():
 def test_m_stretch_exit_between_samples_and_exact_torque():
     """The [M] stretch ends where its solution leaves the region, not at the next output sample (the same
     instant at 20 and at 0.2 samples per second), and its torque output is the averaged model's dL/dt."""
-    from gyro_sim.averaged_m import averaged_m_model
+    from gyro_sim.averaging.averaged_m import averaged_m_model
 
     dense = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={**LOOSE, "fidelity": "auto"}))
     sparse = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={**LOOSE, "fidelity": "auto", "output.rate": 0.2}))

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from gyro_sim import plotting
-from gyro_sim.plotting import command_events, plot_run, slip
+from gyro_sim.io import plotting
+from gyro_sim.io.plotting import command_events, plot_run, slip
 
 TWO_PI = 2.0 * math.pi
 T_END = 2.0
@@ -165,7 +165,7 @@ def test_a_long_run_is_thinned():
 
 # --- every plot function: Figure, saved, backend untouched -------------------------------------------------
 def _bench_results():
-    from gyro_sim.bench import BenchConfig, Results, Row
+    from gyro_sim.apps.bench import BenchConfig, Results, Row
 
     res = Results(BenchConfig(mode="quick", min_wall=0.0, max_reps=1), started="test")
     for k, m in enumerate(["gyro_sim full", "solve_ivp DOP853"]):
@@ -183,9 +183,9 @@ def _phase_data():
 
 
 def _all_plots(tmp_path):
-    from gyro_sim.bench import plot_work_precision
-    from gyro_sim.phase import plot_phase
-    from gyro_sim.sweep import plot_sweep
+    from gyro_sim.apps.bench import plot_work_precision
+    from gyro_sim.apps.phase import plot_phase
+    from gyro_sim.apps.sweep import plot_sweep
 
     rows = [{"status": "ok", "k": float(i), "m": float(i * i)} for i in range(5)] + [{"status": "failed", "k": 5.0}]
     meta = {"name": "s", "grid": ["k"], "metrics": {"m": "k²"}}
@@ -211,7 +211,7 @@ def test_every_plot_function_returns_a_figure_saves_it_and_leaves_the_backend(tm
 # --- the phase portrait and the bench plot say what they draw ----------------------------------------------
 def test_phase_portrait_legend_and_title_in_words():
     from gyro_sim import load_scene
-    from gyro_sim.phase import plot_phase
+    from gyro_sim.apps.phase import plot_phase
 
     fig = plot_phase(_phase_data(), scene=load_scene("phase_portrait"))
     ax = fig.axes[0]
@@ -236,7 +236,7 @@ def test_phase_portrait_legend_and_title_in_words():
 
 
 def test_bench_plot_legend_matches_the_lines_drawn():
-    from gyro_sim.bench import TARGET_ERROR, plot_work_precision
+    from gyro_sim.apps.bench import TARGET_ERROR, plot_work_precision
 
     fig = plot_work_precision(_bench_results())
     (ax,) = fig.axes
@@ -253,8 +253,8 @@ def test_plot_of_a_recorded_bag_shows_slip_and_switching(tmp_path):
     """`gyro-sim plot BAG` (cli._bag_result → plot_run): the bag's field rates, commands and embedded scene give
     the slip panel and the switching instants of a ψ-switching run, as the in-process run's plot has them."""
     import gyro_sim
-    from gyro_sim import cli
-    from gyro_sim.recording import record_result
+    from gyro_sim.apps import cli
+    from gyro_sim.io.recording import record_result
 
     r = gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.1)
     record_result(r, tmp_path / "bag")

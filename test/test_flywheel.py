@@ -16,9 +16,9 @@ import pytest
 import yaml
 
 import gyro_sim
-from gyro_sim import cli
-from gyro_sim import flywheel as fw
-from gyro_sim.frames import euler_angles, quat_to_matrix
+from gyro_sim.apps import cli
+from gyro_sim.physics import flywheel as fw
+from gyro_sim.physics.frames import euler_angles, quat_to_matrix
 
 J = [4.0e-6, 5.5e-6, 7.0e-6]  # kg·m², triaxial
 JF = 2.0e-7  # kg·m²

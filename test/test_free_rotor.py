@@ -1,17 +1,17 @@
 """Free rigid body (physics.md §6 item 10): the geometric stepper against the exact Jacobi solution.
 
 |L| and kinetic energy must stay at round-off over 10⁶ revolutions; the attitude is compared with
-the closed form of :func:`gyro_sim.closed_forms.free_rigid_body`.
+the closed form of :func:`gyro_sim.physics.closed_forms.free_rigid_body`.
 """
 import math
 
 import numpy as np
 import pytest
 
-from gyro_sim.closed_forms import free_rigid_body
-from gyro_sim.frames import quat_to_matrix
-from gyro_sim.scene import scene_from_dict
-from gyro_sim.simulate import run
+from gyro_sim.physics.closed_forms import free_rigid_body
+from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.scenes.scene import scene_from_dict
+from gyro_sim.engine.simulate import run
 
 SPIN = 100.0  # rad/s
 

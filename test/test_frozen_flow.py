@@ -7,9 +7,9 @@ per turn (its own error on these horizons is below 1e-10, docs/numerics.md).
 import numpy as np
 import pytest
 
-from gyro_sim.frames import euler_angles, quat_to_matrix
-from gyro_sim.scene import SceneError, load_scene, scene_from_dict
-from gyro_sim.simulate import Simulator, run
+from gyro_sim.physics.frames import euler_angles, quat_to_matrix
+from gyro_sim.scenes.scene import SceneError, load_scene, scene_from_dict
+from gyro_sim.engine.simulate import Simulator, run
 
 SHELL = {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}
 

@@ -25,10 +25,11 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gyro_sim import scene as scene_mod
-from gyro_sim.scene import MAX_ERRORS, RESULT_BYTES_ENV, Scene, SceneError, builtin_scenes, load_scene, scene_from_dict
-from gyro_sim.scene_text import (MAX_ALIASES, MAX_DEPTH, MAX_SCENE_BYTES, PREVIEW_CHARS, dump_scene_data,
-                                 parse_scene_text)
+from gyro_sim.scenes import scene as scene_mod
+from gyro_sim.scenes.scene import (MAX_ERRORS, RESULT_BYTES_ENV, Scene, SceneError, builtin_scenes, load_scene,
+                                   scene_from_dict)
+from gyro_sim.scenes.scene_text import (MAX_ALIASES, MAX_DEPTH, MAX_SCENE_BYTES, PREVIEW_CHARS, dump_scene_data,
+                                        parse_scene_text)
 
 #: a refusal's message: the head line, MAX_ERRORS errors and "... and K more errors"
 MAX_LINES = MAX_ERRORS + 2
@@ -64,7 +65,7 @@ _LOADER = textwrap.dedent("""
     import json, resource, sys
     limit = int(sys.argv[2])
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    from gyro_sim.scene import SceneError, load_scene
+    from gyro_sim.scenes.scene import SceneError, load_scene
     try:
         load_scene(sys.argv[1])
         out = {"outcome": "loaded"}

@@ -1,4 +1,5 @@
-"""An isotropic rotor whose attitude no one reads: ``output.attitude: false`` (gyro_sim.simulate.integrates_attitude).
+"""An isotropic rotor whose attitude no one reads: ``output.attitude: false``
+(gyro_sim.engine.simulate.integrates_attitude).
 
 Without attitude L and the eddy modes are integrated in the case frame, τ(ė − Ω×e) + e = −τ(dB/dt − Ω×B)
 (gyro_sim/kernels.py); these tests hold it to the body-frame model with the attitude.
@@ -9,11 +10,13 @@ import time
 import numpy as np
 import pytest
 
-from gyro_sim import frozen_flow, load_scene, run
-from gyro_sim.plotting import plot_run
-from gyro_sim.recording import record_result
-from gyro_sim.scene import SceneError
-from gyro_sim.simulate import _case_flag, Runner, Simulator
+from gyro_sim import load_scene, run
+
+from gyro_sim.compiled import frozen_flow
+from gyro_sim.io.plotting import plot_run
+from gyro_sim.io.recording import record_result
+from gyro_sim.scenes.scene import SceneError
+from gyro_sim.engine.simulate import _case_flag, Runner, Simulator
 
 J = 5.592e-6  # kg·m², the default shell's transverse moment, all three equal here
 
@@ -162,7 +165,7 @@ def test_ros_node_runner_keeps_the_attitude():
 
     from pathlib import Path
 
-    from gyro_sim import rerun
+    from gyro_sim.io import rerun
     assert "attitude=True" in inspect.getsource(rerun.rerun_bag)
     import gyro_sim
 
@@ -211,9 +214,9 @@ def test_cli_run_without_attitude_and_recorded(tmp_path, capsys):
     run keeps the attitude (the bag's /gyro/imu and /gyro/euler need it) and the bag holds a finite q."""
     import yaml
 
-    from gyro_sim import cli
-    from gyro_sim.recording import read_bag
-    from gyro_sim.scene import config_dir, parse_scene_text
+    from gyro_sim.apps import cli
+    from gyro_sim.io.recording import read_bag
+    from gyro_sim.scenes.scene import config_dir, parse_scene_text
 
     data = parse_scene_text((config_dir() / "spinup_thin_shell.yaml").read_text())
     data.update(duration=0.2, controller=None, output={"rate": 50.0, "attitude": False})

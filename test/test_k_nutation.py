@@ -1,4 +1,4 @@
-"""[K] (Komarov) averaged nutation models against the full model (gyro_sim.averaged; docs/averaged_k.md).
+"""[K] (Komarov) averaged nutation models against the full model (gyro_sim.averaging.averaged; docs/averaged_k.md).
 
 Every test runs the full model (gyro_sim.run on scenes from scene_from_dict, quasi-static torque
 [K] (1.2)) and compares it with the averaged model in SI; each prints the error it measured.
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import gyro_sim
-from gyro_sim import effects
-from gyro_sim.averaged import (K21Model, PsiSwitchingK, RotorK, StatorsK, k_e_of_scene, nutation_k22,
+from gyro_sim.compiled import effects
+from gyro_sim.averaging.averaged import (K21Model, PsiSwitchingK, RotorK, StatorsK, k_e_of_scene, nutation_k22,
                                nutation_k22_rate, psi_switching_averaged, time_to_theta, transverse_decay_k32)
 
 J = 5.592e-6  # kg·m², equatorial moment of the nutation_oblate rotor
@@ -328,8 +328,8 @@ def test_switched_drive_average_from_the_instantaneous_torque():
     """ψ-average of the quasi-static drive k_e B × dB/dt = c ν_n(ψ) u_n with ν_n = ν sign(u_n·e⊥), e⊥ turning
     about L: ⟨N·e⊥⟩ = (2/π) c ν √(1 − a_3n²) for any direction of L, ⟨N⟩ = 0 in the case frame (so L keeps
     its azimuth, (3.2)). Checked with the field of the simulator's stator triad (kernels.nonlinear_part)."""
-    from gyro_sim import kernels
-    from gyro_sim.simulate import stator_triad
+    from gyro_sim.compiled import kernels
+    from gyro_sim.engine.simulate import stator_triad
 
     rng = np.random.default_rng(3)
     c_m = 1.0

@@ -1,4 +1,4 @@
-"""[KLT] checks: the full coupled model against the averaged and closed-form models of gyro_sim.klt.
+"""[KLT] checks: the full coupled model against the averaged and closed-form models of gyro_sim.physics.klt.
 
 §1 viscoelastic element (effects.damper) against (4)–(12); §2 Lagrange top (effects.unbalance,
 effects.gas_drag) against (18), (19); the scenes viscoelastic_damper and drift_sources. Each test
@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
 
-from gyro_sim import klt
-from gyro_sim.constants import MU0
-from gyro_sim.frames import quat_to_matrix
-from gyro_sim.scene import load_scene, scene_from_dict
-from gyro_sim.simulate import run
+from gyro_sim.physics import klt
+from gyro_sim.physics.constants import MU0
+from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.scenes.scene import load_scene, scene_from_dict
+from gyro_sim.engine.simulate import run
 
 EPS = (0.02, 0.01, 0.005)
 
@@ -364,7 +364,7 @@ def test_drift_sources_scene():
 
 @pytest.mark.parametrize("name", ["viscoelastic_damper", "drift_sources"])
 def test_scenes_run_from_cli(name, tmp_path):
-    from gyro_sim import cli
+    from gyro_sim.apps import cli
 
     assert cli.main(["run", name, "--duration", "0.5", "--out", str(tmp_path), "--quiet"]) == 0
     assert (tmp_path / f"{name}.png").is_file()

@@ -56,19 +56,22 @@ def layer_of(name: str):
 
 MODULES = module_files()
 GRAPH = {name: imports(name, path, MODULES) for name, path in MODULES.items()}
+#: the root: the package, its deprecated flat paths (a shim each, gyro_sim/_moved.py) and gyro_sim.testing (the
+#: kit's public name): above every layer, like gyro_sim itself
+ROOT_MODULES = {"gyro_sim", "gyro_sim._moved", "gyro_sim.testing"} | {f"gyro_sim.{old}" for old in gyro_sim.MOVED}
 
 
 def test_every_module_is_in_a_layer():
-    loose = [n for n in MODULES if n != "gyro_sim" and layer_of(n) is None]
+    loose = [n for n in MODULES if n not in ROOT_MODULES and layer_of(n) is None]
     assert not loose, f"modules outside the layer folders {LAYERS}: {loose}"
-    assert sorted({layer_of(n) for n in MODULES if n != "gyro_sim"}) == sorted(LAYERS)
+    assert sorted({layer_of(n) for n in MODULES if n not in ROOT_MODULES}) == sorted(LAYERS)
 
 
 def test_no_upward_edge():
     rank = {layer: i for i, layer in enumerate(LAYERS)}
     up = [f"{a} (layer {layer_of(a)}, line {line}) imports {b} (layer {layer_of(b)})"
-          for a, deps in GRAPH.items() if a != "gyro_sim" for b, line in deps.items()
-          if rank[layer_of(b)] > rank[layer_of(a)]]
+          for a, deps in GRAPH.items() if a not in ROOT_MODULES for b, line in deps.items()
+          if b in ROOT_MODULES or rank[layer_of(b)] > rank[layer_of(a)]]
     assert not up, "imports that go up a layer:\n  " + "\n  ".join(up)
 
 
@@ -101,7 +104,25 @@ def test_root_imports_nothing_at_import():
 
 
 @pytest.mark.parametrize("old", sorted(gyro_sim.MOVED))
-def test_old_paths_are_the_new_modules(old):
+def test_old_paths_are_shims_that_warn_and_give_the_new_modules(old):
+    """Each flat path of before the layers is a module file of its own (no import hook: nothing in sys.meta_path)
+    that warns and gives the new home's module object."""
     import importlib
+    import sys
 
-    assert importlib.import_module(f"gyro_sim.{old}") is importlib.import_module(f"gyro_sim.{gyro_sim.MOVED[old]}")
+    sys.modules.pop(f"gyro_sim.{old}", None)
+    with pytest.warns(DeprecationWarning, match=rf"gyro_sim\.{old} is deprecated .*gyro_sim\.{gyro_sim.MOVED[old]}"):
+        mod = importlib.import_module(f"gyro_sim.{old}")
+    assert mod is importlib.import_module(f"gyro_sim.{gyro_sim.MOVED[old]}")
+    assert (PKG / f"{old}.py").is_file()
+    assert not [f for f in sys.meta_path if type(f).__module__.startswith("gyro_sim")]
+
+
+def test_gyro_sim_testing_is_the_public_name_of_the_kit():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        import gyro_sim.apps.testing
+        import gyro_sim.testing
+    assert gyro_sim.testing is gyro_sim.apps.testing

@@ -64,10 +64,12 @@ def test_compare_names_new_and_gone_findings():
 def test_license_and_typed_markers():
     assert "Apache License" in (ROOT / "LICENSE").read_text(encoding="utf-8")[:200]
     assert "<license>Apache-2.0</license>" in (ROOT / "package.xml").read_text(encoding="utf-8")
+    from test_packaging import pyproject
+
+    assert pyproject()["project"]["license"] == {"text": "Apache-2.0"}
     call = next(n for n in ast.walk(ast.parse((ROOT / "setup.py").read_text())) if isinstance(n, ast.Call)
                 and getattr(n.func, "id", "") == "setup")
     kw = {k.arg: k.value for k in call.keywords}
-    assert ast.literal_eval(kw["license_files"]) == ["LICENSE"]
     assert ast.literal_eval(kw["package_data"]) == {"gyro_sim": ["py.typed"], "gyro_ctl": ["py.typed"]}
     for package in ("gyro_sim", "gyro_ctl"):
         assert files(package).joinpath("py.typed").is_file()

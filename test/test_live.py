@@ -79,8 +79,8 @@ def test_live_run_is_received_and_decoded(tmp_path, record):
     pytest.importorskip("foxglove", reason="the extra 'live' (pip install '.[live]') is not installed")
     pytest.importorskip("websockets", reason="the test client (pip install '.[test]')")
     import gyro_sim
-    from gyro_sim.live import CHANNELS
-    from gyro_sim.messages import (TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATORS, TOPIC_TF,
+    from gyro_sim.io.live import CHANNELS
+    from gyro_sim.io.messages import (TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATORS, TOPIC_TF,
                                    TOPIC_TF_STATIC, TOPIC_TORQUE, stamp_ns)
 
     per_sample = [TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_TF]
@@ -89,7 +89,7 @@ def test_live_run_is_received_and_decoded(tmp_path, record):
     ref = gyro_sim.run(scene, duration=DURATION, on_samples=lambda s: None, attitude=True)
     n = len(ref.t)
     bag = tmp_path / "bag"
-    cmd = [sys.executable, "-m", "gyro_sim.cli", "run", SCENE, "--duration", str(DURATION), "--out", tmp_path,
+    cmd = [sys.executable, "-m", "gyro_sim.apps.cli", "run", SCENE, "--duration", str(DURATION), "--out", tmp_path,
            "--quiet", "--live", "--live-port", "0", "--live-wait", str(len(CHANNELS)), "--live-hold", "600",
            "--rate-factor", "10"] + (["--record", bag] if record else [])
     proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -136,7 +136,7 @@ def test_live_run_is_received_and_decoded(tmp_path, record):
     static = {tr["child_frame_id"] for _, m in got[TOPIC_TF_STATIC] for tr in m["transforms"]}
     assert static == {f"gyro_stator_{name}" for name in ref.stator_names}
     if record:
-        from gyro_sim.recording import bag_info, read_bag
+        from gyro_sim.io.recording import bag_info, read_bag
 
         assert _layout_topics(json.loads(LAYOUT.read_text())) <= set(bag_info(bag)["topics"])
         b = read_bag(bag)
@@ -160,8 +160,8 @@ def _layout_topics(layout: dict) -> set:
 
 
 def test_layout_follows_foxglove_format_and_reads_the_live_and_bag_topics():
-    from gyro_sim.live import CHANNELS
-    from gyro_sim.messages import FRAME_CASE, FRAME_L, FRAME_ROTOR, TOPICS, state_messages
+    from gyro_sim.io.live import CHANNELS
+    from gyro_sim.io.messages import FRAME_CASE, FRAME_L, FRAME_ROTOR, TOPICS, state_messages
 
     layout = json.loads(LAYOUT.read_text(encoding="utf-8"))
     # the app's exported layout: configById (panel id "<type>!<suffix>" → config), a mosaic tree of the ids
@@ -205,9 +205,9 @@ def test_live_without_foxglove_is_one_line_before_any_work(tmp_path):
     (tmp_path / "site").mkdir()
     (tmp_path / "site/sitecustomize.py").write_text("import sys\nsys.modules['foxglove'] = None\n")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path / "site"), str(ROOT)]))
-    r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", SCENE, "--live", "--out", str(tmp_path / "out"),
-                        "--record", str(tmp_path / "bag")], capture_output=True, text=True, timeout=300,
-                       cwd=tmp_path, env=env)
+    r = subprocess.run([sys.executable, "-m", "gyro_sim.apps.cli", "run", SCENE, "--live",
+                        "--out", str(tmp_path / "out"), "--record", str(tmp_path / "bag")],
+                       capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
     assert (r.returncode, r.stderr.splitlines()) == (
         2, ["error: gyro-sim run --live needs the 'live' extra: pip install 'gyro_sim[live]' (missing: foxglove)"]), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]  # nothing was run or written
@@ -220,7 +220,7 @@ def test_live_without_foxglove_is_one_line_before_any_work(tmp_path):
     (["--fidelity", "auto"], "error: --fidelity auto: --live streams the full model's samples"),
 ])
 def test_live_bad_usage_is_one_line(tmp_path, capsys, extra, message):
-    from gyro_sim.cli import main
+    from gyro_sim.apps.cli import main
 
     assert main(["run", SCENE, "--live", "--out", str(tmp_path / "out"), *extra]) == 2
     err = capsys.readouterr().err.splitlines()
@@ -231,7 +231,7 @@ def test_live_bad_usage_is_one_line(tmp_path, capsys, extra, message):
 def test_pacing_follows_the_rate_factor_on_a_fake_clock():
     pytest.importorskip("foxglove", reason="the extra 'live' (pip install '.[live]') is not installed")
     import gyro_sim
-    from gyro_sim.live import LiveView
+    from gyro_sim.io.live import LiveView
 
     now = [100.0]
     slept = []

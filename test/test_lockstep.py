@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
 
-from gyro_sim.recording import bag_info, read_bag  # noqa: E402
+from gyro_sim.io.recording import bag_info, read_bag  # noqa: E402
 from test_ros import PROBE, PROBE_WINDOW, closed_loop, finish, ros  # noqa: E402,F401  (ros: the fixture)
 
 pytestmark = pytest.mark.ros
@@ -58,9 +58,9 @@ def test_a_killed_controller_fails_the_run(tmp_path):
 
     bag = tmp_path / "bag"
     env = dict(ros_env(unique_domain()), PYTHONUNBUFFERED="1")
-    p = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "run", "nutation_oblate", "--ros", "--duration", "40",
-                          "--record", str(bag), "--out", str(tmp_path)], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True)
+    p = subprocess.Popen([sys.executable, "-m", "gyro_sim.apps.cli", "run", "nutation_oblate", "--ros",
+                          "--duration", "40", "--record", str(bag), "--out", str(tmp_path)], env=env,
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         ctl, t0 = None, time.time()
         while time.time() - t0 < 120 and not (ctl and bag.exists()):  # the run has started

@@ -26,14 +26,14 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from gyro_sim import effects
-from gyro_sim import magnetizable as mg
-from gyro_sim.closed_forms import constant_field_transverse_decay_rate
-from gyro_sim.conductor import conductor_model
-from gyro_sim.constants import MU0
-from gyro_sim.frames import quat_to_matrix
-from gyro_sim.scene import load_scene, scene_from_dict
-from gyro_sim.simulate import Simulator, run
+from gyro_sim.compiled import effects
+from gyro_sim.physics import magnetizable as mg
+from gyro_sim.physics.closed_forms import constant_field_transverse_decay_rate
+from gyro_sim.physics.conductor import conductor_model
+from gyro_sim.physics.constants import MU0
+from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.scenes.scene import load_scene, scene_from_dict
+from gyro_sim.engine.simulate import Simulator, run
 
 A, SIGMA = 0.025, 2.5e7  # solid sphere: radius m, conductivity S/m
 SPHERE = {"kind": "solid_sphere", "outer_radius": A, "conductivity": SIGMA}

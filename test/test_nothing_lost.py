@@ -18,12 +18,12 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 import gyro_sim
-from gyro_sim.messages import stamp_ns
-from gyro_sim.recording import (CHUNK_SPAN, MIN_FREE_BYTES, STREAM_BUFFER_ROWS, BagRecorder, bag_info, read_bag,
+from gyro_sim.io.messages import stamp_ns
+from gyro_sim.io.recording import (CHUNK_SPAN, MIN_FREE_BYTES, STREAM_BUFFER_ROWS, BagRecorder, bag_info, read_bag,
                                 record_result, record_run)
-from gyro_sim.simulate import Runner, drive
+from gyro_sim.engine.simulate import Runner, drive
 
-GYRO_SIM = [sys.executable, "-m", "gyro_sim.cli"]
+GYRO_SIM = [sys.executable, "-m", "gyro_sim.apps.cli"]
 
 
 def _mcap(bag: Path) -> Path:
@@ -36,7 +36,7 @@ def long_scene(tmp_path: Path) -> str:
     tests want a long run that streams its bag at the old pace, to be stopped mid-run."""
     import yaml
 
-    from gyro_sim.scene import builtin_scenes
+    from gyro_sim.scenes.scene import builtin_scenes
 
     data = yaml.safe_load(builtin_scenes()["spinup_thin_shell"].read_text())
     data["accuracy"] = {"rtol": 1e-3, "attitude": None}
@@ -200,7 +200,7 @@ def test_streamed_run_memory_does_not_grow_with_its_duration(tmp_path, monkeypat
     ~2 KB per sample while writing a bag). A streamed run now holds STREAM_BUFFER_ROWS rows: its peak of traced
     allocations grows from 2 s to 8 s (4x the samples) by less than 150 bytes per sample (its time grid), and the
     Runner never holds more rows."""
-    import gyro_sim.recording as rec_mod
+    import gyro_sim.io.recording as rec_mod
 
     # (both bounds reached within 2 s: the buffer and the preview are bounded, at smaller sizes here)
     monkeypatch.setattr(rec_mod, "PREVIEW_ROWS", 256)
@@ -269,7 +269,7 @@ def _in_tmpfs(tmp_path: Path, size: str, command: str, ro: bool = False, env=Non
 
 
 def _cmd(*args: str) -> str:
-    return " ".join([sys.executable, "-m", "gyro_sim.cli"] + list(args))
+    return " ".join([sys.executable, "-m", "gyro_sim.apps.cli"] + list(args))
 
 
 def test_full_disk_mid_run_closes_the_bag_with_what_fit(tmp_path):

@@ -103,7 +103,7 @@ def test_cli_without_rclpy(tmp_path, argv, what):
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     argv = [a.replace("BAG", str(tmp_path / "bag")) for a in argv] + (["--out", str(tmp_path / "out")]
                                                                         if argv[0] == "run" else [])
-    r = run([sys.executable, "-m", "gyro_sim.cli", *argv], timeout=300, cwd=tmp_path, env=env)
+    r = run([sys.executable, "-m", "gyro_sim.apps.cli", *argv], timeout=300, cwd=tmp_path, env=env)
     assert (r.returncode, r.stderr.splitlines()) == (2, [f"error: {what} {ROS_MISSING}"]), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]  # nothing was run or written
 # --- parameter files under a namespace ------------------------------------------------------------
@@ -275,8 +275,11 @@ def test_launch_file_with_upstream_launch():
 
 def colcon_env(ws: Path) -> dict:
     """No user colcon defaults, no ament prefixes of the caller; the venv's Python first on PATH."""
-    env = {k: v for k, v in os.environ.items() if k not in ("AMENT_PREFIX_PATH", "COLCON_PREFIX_PATH", "PYTHONPATH")}
-    return dict(env, COLCON_HOME=str(ws / "colcon_home"), PATH=f"{BIN}{os.pathsep}{env.get('PATH', '')}")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("AMENT_PREFIX_PATH", "COLCON_PREFIX_PATH", "PYTHONPATH", "NUMBA_CACHE_DIR")}
+    # (the build compiles the default scene's kernels alone: test_colcon_first_run_compiles_nothing)
+    return dict(env, COLCON_HOME=str(ws / "colcon_home"), PATH=f"{BIN}{os.pathsep}{env.get('PATH', '')}",
+                GYRO_SIM_PRECOMPILE="spinup_thin_shell")
 
 
 @pytest.fixture(scope="module", params=["plain", "symlink"])
@@ -341,6 +344,18 @@ def test_colcon_executables_run(colcon_ws):
         assert r.returncode == 0 and r.stdout.startswith(expect), (exe, r.stdout, r.stderr)
 
 
+def test_colcon_first_run_compiles_nothing(colcon_ws):
+    """colcon build compiles the kernels into what it installs (plain: the install tree; --symlink-install: next to
+    the sources the build links): the first run of the scene in the sourced workspace compiles nothing."""
+    from test_install import FIRST_RUN
+
+    r = sourced(colcon_ws, "python", "-c", FIRST_RUN, timeout=300)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout.splitlines()[-1])
+    print(f"\n  colcon ({colcon_ws.mode}): first run {out['compile_s']:.2f} s compiling, {out['steps']} steps")
+    assert out["compile_s"] == 0.0 and out["steps"] > 0
+
+
 # --- the manifests ----------------------------------------------------------------------------------
 
 #: top-level module imported by the code → rosdep key (None: no key in rosdistro; the manifest says so)
@@ -386,8 +401,8 @@ def imported_modules(folder: str) -> set:
 
 
 def message_packages() -> set:
-    """Packages of the message types the nodes load by name (``gyro_sim.messages.TOPICS``)."""
-    from gyro_sim.messages import TOPICS
+    """Packages of the message types the nodes load by name (``gyro_sim.io.messages.TOPICS``)."""
+    from gyro_sim.io.messages import TOPICS
 
     return {t.split("/")[0] for t in TOPICS.values()}
 
@@ -426,19 +441,26 @@ def test_manifest_declares_every_import():
     assert not check_declared(ROOT / "package.xml", modules | message_packages(), names(pkg.exec_depends))
 
 
+def pyproject() -> dict:
+    """pyproject.toml, parsed."""
+    try:
+        import tomllib
+    except ImportError:  # Python 3.10 (the 'test' extra brings tomli there)
+        import tomli as tomllib
+    return tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+
+
 def setup_requirements() -> dict:
-    """setup.py's install_requires and extras_require, read from its source: {'': [...], extra: [...]}."""
-    call = next(n for n in ast.walk(ast.parse((ROOT / "setup.py").read_text())) if isinstance(n, ast.Call)
-                and getattr(n.func, "id", "") == "setup")
-    kw = {k.arg: k.value for k in call.keywords}
-    return {"": ast.literal_eval(kw["install_requires"]), **ast.literal_eval(kw["extras_require"])}
+    """The package's dependencies and extras (pyproject.toml): {'': [...], extra: [...]}."""
+    project = pyproject()["project"]
+    return {"": project["dependencies"], **project["optional-dependencies"]}
 
 
 def rosdep_key(requirement: str):
     name = Requirement(requirement).name.lower()
     if name.startswith("ros-"):
         return name[4:].replace("-", "_")
-    assert name in PIP_KEYS, f"{name}: a requirement of setup.py; add its rosdep key to package.xml and PIP_KEYS"
+    assert name in PIP_KEYS, f"{name}: a requirement of pyproject.toml; add its rosdep key to package.xml and PIP_KEYS"
     return PIP_KEYS[name]
 
 
@@ -449,15 +471,15 @@ def test_manifest_declares_setup_requirements():
     for extra, deps in (("", run_deps), ("ros", run_deps), ("sweep", run_deps), ("data", run_deps),
                         ("test", test_deps)):
         for r in req[extra]:
-            if extra == "test" and Requirement(r).name.startswith("colcon-"):
-                continue  # the build tool, not a dependency
+            if extra == "test" and (Requirement(r).name.startswith("colcon-") or Requirement(r).name == "tomli"):
+                continue  # the build tool; the TOML reader of Python < 3.11 (tomllib of a ROS distribution's)
             key = rosdep_key(r)
             if key in NOT_A_DEPENDENCY:
                 continue
             if key is None:
                 assert says_no_key(ROOT / "package.xml", Requirement(r).name), f"{r}: no rosdep key, not said"
             else:
-                assert key in deps, f"setup.py {extra or 'install_requires'} {r!r}: {key} not in package.xml"
+                assert key in deps, f"pyproject.toml {extra or 'dependencies'} {r!r}: {key} not in package.xml"
 
 
 def test_gyro_ctl_manifest():
@@ -495,10 +517,10 @@ def check_ament_prefix(prefix: Path):
 
 def test_ros_index_cli(tmp_path):
     prefix = tmp_path / "prefix"
-    r = run([sys.executable, "-m", "gyro_sim.cli", "ros-index", prefix])
+    r = run([sys.executable, "-m", "gyro_sim.apps.cli", "ros-index", prefix])
     assert r.returncode == 0, r.stderr
     tree = sorted(p.relative_to(prefix) for p in prefix.rglob("*"))
-    assert run([sys.executable, "-m", "gyro_sim.cli", "ros-index", prefix]).returncode == 0  # idempotent
+    assert run([sys.executable, "-m", "gyro_sim.apps.cli", "ros-index", prefix]).returncode == 0  # idempotent
     assert sorted(p.relative_to(prefix) for p in prefix.rglob("*")) == tree
     assert all((prefix / f).is_file() for f in DATA_FILES)
     check_ament_prefix(prefix)

@@ -1,6 +1,6 @@
 """The phase portrait of [K] §3 in the FULL model (physics.md §6 item 5): existence boundaries (3.7) of the
 equilibria at θ = π/2 and (3.10) of the limit cycles r⁺/r₋, the type of the equilibria, the polhode (3.11)
-after the fields are switched off, and ``gyro_sim.phase.plot_phase``.
+after the fields are switched off, and ``gyro_sim.apps.phase.plot_phase``.
 
 Every run is ``gyro_sim.run`` on a scene built from a dict: quasi-static torque [K] (1.2), the ψ-switching
 law of gyro_ctl sampled at 1/50 of the precession period, control rates ν = (20, 50)·Λ (Λ = |L|/J, far
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import gyro_sim
-from gyro_sim.averaged import PsiSwitchingK
+from gyro_sim.averaging.averaged import PsiSwitchingK
 
 J = 5.592e-6  # kg·m², equatorial moment (harmonic mean J of [K])
 B = 0.01  # coil constant, T/A
@@ -315,7 +315,7 @@ def test_polhode_after_the_fields_are_switched_off():
     and θ swings between the bounds that follow from (3.11): sin²θ = Q/(κ/(1+κ) ∓ δ) (for κ < 0 the order of
     [K]'s printed bounds (1+κ)Q/(κ ± μδ(1+κ)) is reversed: Q < 0)."""
     from gyro_ctl.laws import make_law
-    from gyro_sim.simulate import Runner
+    from gyro_sim.engine.simulate import Runner
 
     d, m = tuned(inertia(KAPPA_EQ, DELTA_EQ), "s", 1.5, EPS_EQ)
     Ls = J * m.Lam0 / (1 + m.kappa)
@@ -360,8 +360,8 @@ def test_plot_phase_writes_png_for_runs_bags_and_scenes_it_cannot_describe(tmp_p
     focus at θ = 90°), on the same run recorded to a bag (scene read from the bag), in [K]'s φ, and on scenes
     the averaged model does not describe (no controller, isotropic rotor, no control stators): PNGs are written
     and ``portrait_model`` gives the reason shown in the title."""
-    from gyro_sim.phase import plot_phase, portrait_model
-    from gyro_sim.recording import read_bag, record_result
+    from gyro_sim.apps.phase import plot_phase, portrait_model
+    from gyro_sim.io.recording import read_bag, record_result
 
     scene = gyro_sim.load_scene("phase_portrait")
     m, note = portrait_model(scene)

@@ -8,11 +8,13 @@ import warnings
 import numpy as np
 import pytest
 
-from gyro_sim import frozen_flow, qs_flow
-from gyro_sim.accuracy import legacy
-from gyro_sim.frames import quat_to_matrix
-from gyro_sim.scene import load_scene
-from gyro_sim.simulate import Simulator, run
+from gyro_sim.compiled import frozen_flow
+
+from gyro_sim.compiled import qs_flow
+from gyro_sim.scenes.accuracy import legacy
+from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.scenes.scene import load_scene
+from gyro_sim.engine.simulate import Simulator, run
 
 #: the default scene's quasi-static variant, as the benchmark runs it (no controller)
 QS = {"torque_model": "quasi_static", "controller": None}

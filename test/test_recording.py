@@ -21,8 +21,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 import gyro_sim
-from gyro_sim import messages as gm
-from gyro_sim.recording import BagRecorder, bag_info, read_bag, record_result
+from gyro_sim.io import messages as gm
+from gyro_sim.io.recording import BagRecorder, bag_info, read_bag, record_result
 
 STATE_TOPICS = ["/clock", "/gyro/imu", "/gyro/kinetic_moment", "/gyro/euler", "/gyro/torque", "/tf", "/gyro/stators"]
 NAMES = ["z1", "z2", "z3"]
@@ -51,7 +51,7 @@ def assert_bit_equal(a, b, what):
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     d = tmp_path_factory.mktemp("rec")
-    from gyro_sim.scene import parse_scene_text
+    from gyro_sim.scenes.scene import parse_scene_text
 
     data = parse_scene_text(Path(gyro_sim.load_scene("spinup_thin_shell").source).read_text())
     data.pop("controller", None)  # open loop: the scene's commands alone drive the stators
@@ -212,7 +212,7 @@ def test_values_bit_exact_by_independent_reader(recorded):
     assert scene[0] == 0 and scene[1].data == recorded["scene_text"]
     assert "/gyro/status" not in topic_msgs
     # /tf: gyro_case → gyro_rotor is the attitude (bit for bit), gyro_case → gyro_l_frame the L-frame
-    from gyro_sim.frames import l_frame, quat_to_matrix
+    from gyro_sim.physics.frames import l_frame, quat_to_matrix
 
     tf = [m for _, m in topic_msgs["/tf"]]
     assert all([(x.header.frame_id, x.child_frame_id) for x in m.transforms]
@@ -398,7 +398,7 @@ def test_bad_sample_writes_nothing(tmp_path, recorded):
 CHILD = """
 import sys, time
 import numpy as np
-from gyro_sim.recording import BagRecorder, sigterm_as_interrupt
+from gyro_sim.io.recording import BagRecorder, sigterm_as_interrupt
 names = ["z1", "z2", "z3"]
 with sigterm_as_interrupt(), BagRecorder(sys.argv[1], "x: 1\\n", "child") as rec:
     i = 0
@@ -595,7 +595,7 @@ def test_to_rosbags_round_trip():
 
 def test_close_defers_a_second_ctrl_c():
     """A signal during the bag's closing is held and delivered after it (no half-closed file)."""
-    from gyro_sim.recording import _signals_deferred
+    from gyro_sim.io.recording import _signals_deferred
 
     done = False
     with pytest.raises(KeyboardInterrupt):
@@ -610,7 +610,7 @@ def test_a_signal_within_a_sample_ends_the_bag_after_the_whole_sample(tmp_path, 
     """CI failure: a Ctrl-C between two messages of one sample left half a sample as the bag's last stamp while
     gyro_sim.duration named the sample before (3.0 against 3.02). Now the signal is raised once the sample is
     written: the last stamp holds every state topic and is the bag's duration."""
-    from gyro_sim.recording import BagRecorder, read_bag, sigterm_as_interrupt
+    from gyro_sim.io.recording import BagRecorder, read_bag, sigterm_as_interrupt
 
     bag = tmp_path / "bag"
     z3 = np.zeros(3)
@@ -687,8 +687,8 @@ def test_rclpy_messages_serialize_to_the_same_cdr_as_the_bag():
 
 def test_rerun_of_a_closed_loop_bag_is_bit_identical(tmp_path):
     """A bag holds its scene and every applied command: re-simulating it gives the same bits."""
-    from gyro_sim.recording import record_result
-    from gyro_sim.rerun import rerun_bag
+    from gyro_sim.io.recording import record_result
+    from gyro_sim.io.rerun import rerun_bag
 
     res = gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.3)
     assert len(res.commands) == 300  # one per controller tick

@@ -14,9 +14,9 @@ from scipy.integrate import solve_ivp
 
 from gyro_ctl.reorient import (ReorientParams, averaged_gamma, averaged_rate, plan, reorient, scene_constants,
                                segment_program)
-from gyro_sim.closed_forms import quasi_static_mean_torque
-from gyro_sim.scene import SceneError, parse_scene_text, scene_from_dict
-from gyro_sim.simulate import Runner, stator_triad
+from gyro_sim.physics.closed_forms import quasi_static_mean_torque
+from gyro_sim.scenes.scene import SceneError, parse_scene_text, scene_from_dict
+from gyro_sim.engine.simulate import Runner, stator_triad
 
 SHELL = {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}
 J_OBLATE = [5.592e-6, 5.592e-6, 5.704e-6]

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import gyro_sim
-from gyro_sim import results
-from gyro_sim.frames import euler_angles, quat_to_matrix
-from gyro_sim.recording import BagData, record_result, record_run
-from gyro_sim.simulate import Runner, Simulator, drive
+from gyro_sim.io import results
+from gyro_sim.physics.frames import euler_angles, quat_to_matrix
+from gyro_sim.io.recording import BagData, record_result, record_run
+from gyro_sim.engine.simulate import Runner, Simulator, drive
 
 pd = pytest.importorskip("pandas", reason="the extra 'data' (pip install 'gyro_sim[data]') is not installed")
 xr = pytest.importorskip("xarray", reason="the extra 'data' (pip install 'gyro_sim[data]') is not installed")
@@ -168,7 +168,7 @@ def test_missing_extra_says_which_before_any_work(res, monkeypatch, method, modu
     def no_work(*a, **k):
         raise AssertionError("work done before the missing extra was reported")
 
-    from gyro_sim.engine import result  # (the views' home; gyro_sim.results re-exports them)
+    from gyro_sim.engine import result  # (the views' home; gyro_sim.io.results re-exports them)
 
     monkeypatch.setattr(result, work, no_work)
     with pytest.raises(ImportError) as exc:
@@ -319,7 +319,7 @@ def test_read_bag_equals_the_in_process_run(res, tmp_path, recorder):
     pd.testing.assert_frame_equal(b, a, check_exact=True)
     assert b.attrs == a.attrs
     # the raw topics (BagData) and the .mcap file read the same
-    data = gyro_sim.recording.read_bag(bag)
+    data = gyro_sim.io.recording.read_bag(bag)
     assert isinstance(data, BagData)
     for src in (data, next(bag.glob("*.mcap"))):
         again = gyro_sim.read_bag(src)
@@ -332,7 +332,7 @@ def test_read_bag_equals_the_in_process_run(res, tmp_path, recorder):
 
 def test_read_bag_without_a_scene_asks_for_one(res, tmp_path):
     record_result(res, tmp_path / "bag")
-    data = gyro_sim.recording.read_bag(tmp_path / "bag")
+    data = gyro_sim.io.recording.read_bag(tmp_path / "bag")
     data.scene_text = None
     with pytest.raises(ValueError, match=r"the bag holds no scene .*give scene="):
         gyro_sim.read_bag(data)

@@ -19,8 +19,8 @@ import pytest
 pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
 
 import gyro_sim  # noqa: E402
-from gyro_sim.recording import bag_info, read_bag  # noqa: E402
-from gyro_sim.rerun import rerun_bag  # noqa: E402
+from gyro_sim.io.recording import bag_info, read_bag  # noqa: E402
+from gyro_sim.io.rerun import rerun_bag  # noqa: E402
 from gyro_sim.testing import unique_domain  # noqa: E402  (a free ROS_DOMAIN_ID; the gyro_bench fixture uses it too)
 
 pytestmark = pytest.mark.ros
@@ -141,7 +141,7 @@ def test_spinup_over_dds_equals_in_process(gyro_bench):
 def test_replay_republishes_a_bag(ros, tmp_path):
     bag = tmp_path / "src"
     gyro_sim_run = gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.5)
-    from gyro_sim.recording import record_result
+    from gyro_sim.io.recording import record_result
 
     record_result(gyro_sim_run, bag)
     out = tmp_path / "seen.json"
@@ -167,7 +167,7 @@ def test_replay_stopped_by_a_signal_says_so_in_its_status(ros, tmp_path):
     """A replay ended by SIGTERM exited 0 like a whole one (scripts could not tell them apart): now 143, and its
     last line says it was interrupted."""
     bag = tmp_path / "src"
-    from gyro_sim.recording import record_result
+    from gyro_sim.io.recording import record_result
 
     record_result(gyro_sim.run(gyro_sim.load_scene("nutation_oblate"), duration=0.5), bag)
     out = tmp_path / "seen.json"

@@ -15,8 +15,8 @@ import pytest
 pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are not installed")
 
 import gyro_sim  # noqa: E402
-from gyro_sim.recording import bag_info, read_bag  # noqa: E402
-from gyro_sim.rerun import rerun_bag  # noqa: E402
+from gyro_sim.io.recording import bag_info, read_bag  # noqa: E402
+from gyro_sim.io.rerun import rerun_bag  # noqa: E402
 from test_ros import PROBE, PROBE_WINDOW, finish, ros  # noqa: E402,F401  (ros: the fixture)
 
 pytestmark = pytest.mark.ros

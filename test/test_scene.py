@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from gyro_sim.scene import SceneError, builtin_scenes, load_scene, parse_scene_text, scene_from_dict
+from gyro_sim.scenes.scene import SceneError, builtin_scenes, load_scene, parse_scene_text, scene_from_dict
 
 REQUIRED = {"spinup_thin_shell", "spinup_solid_sphere", "free_rotor", "constant_field",
             "pulsating_field", "rotating_field"}

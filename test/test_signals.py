@@ -105,7 +105,7 @@ def wait_for_text(log: Path, pattern: str, proc: subprocess.Popen, timeout: floa
 def ros_run(procs: Processes, tmp_path: Path, *extra, scene="spinup_thin_shell"):
     """``gyro-sim run SCENE --ros --record BAG`` in a process group of its own; (process, log, bag, out dir)."""
     bag, out, log = tmp_path / "bag", tmp_path / "out", tmp_path / "launcher.log"
-    argv = [sys.executable, "-m", "gyro_sim.cli", "run", scene, "--ros", "--quiet", "--out", str(out),
+    argv = [sys.executable, "-m", "gyro_sim.apps.cli", "run", scene, "--ros", "--quiet", "--out", str(out),
             "--record", str(bag), *extra]
     p = procs.start(argv, log, env=ros_env(unique_domain()), cwd=tmp_path)
     return p, log, bag, out
@@ -128,7 +128,7 @@ def started_run(procs: Processes, tmp_path: Path):
 
 
 def read_interrupted_bag(bag: Path, sig: signal.Signals):
-    from gyro_sim.recording import bag_info, read_bag
+    from gyro_sim.io.recording import bag_info, read_bag
 
     info = bag_info(bag)
     b = read_bag(bag)
@@ -188,7 +188,7 @@ def test_ctrl_c_on_the_process_group_gives_the_summary_and_130(procs, tmp_path):
 def test_ctrl_c_as_the_nodes_start_ends_quietly_with_130(procs, tmp_path):
     """Ctrl-C as soon as both node processes exist (they are still importing, usually): 130, no traceback; the bag,
     if the simulator had opened it by then, complete; else one line saying nothing was recorded."""
-    from gyro_sim.recording import bag_info
+    from gyro_sim.io.recording import bag_info
 
     p, log, bag, out = ros_run(procs, tmp_path, *LONG)
     end = time.monotonic() + START_TIMEOUT
@@ -223,7 +223,7 @@ def test_sigkill_of_the_launcher_leaves_no_node_running(procs, tmp_path):
 
 @needs_ros
 def test_a_complete_run_exits_0(procs, tmp_path):
-    from gyro_sim.recording import bag_info
+    from gyro_sim.io.recording import bag_info
 
     p, log, bag, out = ros_run(procs, tmp_path, "--duration", "0.5")
     code = p.wait(timeout=START_TIMEOUT + END_TIMEOUT)
@@ -402,8 +402,8 @@ def test_the_cli_reports_each_end_of_the_simulator(monkeypatch, tmp_path, capsys
     a simulator that had to be killed or refused its scene: an ``error:`` line with its status, exit 2; a simulator
     whose disk filled (status 1, its bag closed with what fit): an ``error:`` line, the summary of the bag and 1, as
     the README's table says (issue 29: it was 2)."""
-    from gyro_sim import cli
-    from gyro_sim.recording import BagRecorder
+    from gyro_sim.apps import cli
+    from gyro_sim.io.recording import BagRecorder
     from gyro_sim.ros import launch as launch_mod
 
     bag = tmp_path / "bag"
@@ -416,8 +416,8 @@ def test_the_cli_reports_each_end_of_the_simulator(monkeypatch, tmp_path, capsys
             rec.close()
         if case == "disk_full":  # (what the node's recorder leaves: the samples before the disk filled)
             from gyro_sim.engine.simulate import run
-            from gyro_sim.recording import record_result
-            from gyro_sim.scene import load_scene
+            from gyro_sim.io.recording import record_result
+            from gyro_sim.scenes.scene import load_scene
 
             record_result(run(load_scene("spinup_thin_shell"), duration=0.1), bag)
         return {"no_bag": 130, "no_samples": 130, "killed": -9, "refused": 2, "disk_full": 1}[case]
@@ -465,6 +465,6 @@ def test_a_node_whose_ros_teardown_hangs_still_exits_with_its_status(procs, tmp_
     print(f"\nstatus {status}; last lines: {text.strip().splitlines()[-2:]}")
     assert status == 0, text
     assert "the ROS teardown took more than 2 s; exiting with status 0" in text
-    from gyro_sim.recording import bag_info
+    from gyro_sim.io.recording import bag_info
 
     assert bag_info(bag)["end_reason"] == "complete"

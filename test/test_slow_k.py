@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import gyro_sim
-from gyro_sim.simulate import Runner
-from gyro_sim.scene import Accuracy
-from gyro_sim.slow_k import slow_k_of, slow_state
+from gyro_sim.engine.simulate import Runner
+from gyro_sim.scenes.scene import Accuracy
+from gyro_sim.averaging.slow_k import slow_k_of, slow_state
 from test_k_nutation import crossing, k21_scene, psi_scene
 
 
@@ -142,7 +142,7 @@ def test_a_constant_law_overrides_a_scheduled_command_in_auto_as_in_full():
     """A `manual` law (period 1 s) re-sends z3 at 200 rad/s at its ticks; a scheduled command sets 300 rad/s at
     0.5 s. The full model runs 300 rad/s until the tick at 1 s; `auto` holds no averaged stretch across that
     tick (the law is not settled: its next command differs) and re-applies nothing between ticks."""
-    from gyro_sim.scene import Command
+    from gyro_sim.scenes.scene import Command
 
     s = _three_stators(duration=6.0, controller={"law": "manual", "period": 1.0, "params": {"commands": {
         "z1": {"current": 0.19445, "rate": 420.0}, "z2": {"current": 0.19445, "rate": -1040.0},

@@ -1,4 +1,4 @@
-"""Start-up of a process (issue 23): what ``import gyro_sim``, ``from gyro_sim.simulate import run`` and a first
+"""Start-up of a process (issue 23): what ``import gyro_sim``, ``from gyro_sim.engine.simulate import run`` and a first
 run import and load. Each check runs in a new interpreter (``sys.modules`` of this one holds whatever other tests
 imported); none bounds a time (the benchmark's start-up part measures those: gyro_sim/bench_scaling.py)."""
 import json
@@ -36,7 +36,7 @@ def test_import_gyro_sim_imports_no_numerical_stack():
 
 
 def test_importing_run_imports_no_scipy_subpackage():
-    mods = fresh("from gyro_sim.simulate import run\n" + MODULES)
+    mods = fresh("from gyro_sim.engine.simulate import run\n" + MODULES)
     assert not [m for m in mods if m.startswith(HEAVY)], mods
     assert "numba" in mods  # (the kernels are numba's: a run needs it)
 
@@ -46,10 +46,10 @@ def test_importing_run_imports_no_scipy_subpackage():
     ("three_stators", "lawson8", ("gyro_sim.compiled.frozen_flow.integrate_frozen", "gyro_sim.compiled.kernels.integrate_free")),
 ])
 def test_a_run_loads_only_what_its_scene_uses(scene, stepper, unused):
-    """A run imports no SciPy subpackage it does not use (its error estimate imported gyro_sim.fidelity, hence
+    """A run imports no SciPy subpackage it does not use (its error estimate imported gyro_sim.engine.fidelity, hence
     scipy.integrate; lawson8's table imported scipy.integrate; the conductor scipy.optimize and scipy.special) and
     loads only the compiled kernels of its stepper (numba loads a kernel's cache on its first call)."""
-    got = fresh(f"from gyro_sim.scene import load_scene\nfrom gyro_sim.simulate import Simulator, run\n"
+    got = fresh(f"from gyro_sim.scenes.scene import load_scene\nfrom gyro_sim.engine.simulate import Simulator, run\n"
                 f"sc = load_scene({scene!r})\nassert Simulator(sc)._method() == {stepper!r}\n"
                 f"r = run(sc, duration=0.02)\nassert r.steps > 0\n" + LOADED)
     assert not [m for m in got["modules"] if m.startswith(HEAVY)], got["modules"]
@@ -59,7 +59,7 @@ def test_a_run_loads_only_what_its_scene_uses(scene, stepper, unused):
 def test_mu0_is_scipys():
     from scipy.constants import mu_0
 
-    from gyro_sim.constants import MU0
+    from gyro_sim.physics.constants import MU0
 
     assert MU0 == mu_0  # the same float: CODATA 2022 (a SciPy with other CODATA values fails here)
 
@@ -69,7 +69,7 @@ def test_dop853_table_is_scipys():
     d = pytest.importorskip("scipy.integrate._ivp.dop853_coefficients",
                             reason="SciPy's private module of the DOP853 table is gone (moved or renamed)")
 
-    from gyro_sim.kernels import dop853_tableau
+    from gyro_sim.compiled.kernels import dop853_tableau
 
     A, b, c = dop853_tableau()
     s = d.N_STAGES

@@ -10,9 +10,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import gyro_sim
-from gyro_sim.scene import Accuracy
-from gyro_sim.conductor import conductor_model, g_solid_sphere
-from gyro_sim.scene import SceneError, scene_from_dict
+from gyro_sim.scenes.scene import Accuracy
+from gyro_sim.physics.conductor import conductor_model, g_solid_sphere
+from gyro_sim.scenes.scene import SceneError, scene_from_dict
 
 SHELL = {"kind": "thin_shell", "outer_radius": 0.025, "thickness": 0.001, "conductivity": 2.5e7}
 J = [5.592e-6, 5.592e-6, 5.704e-6]
@@ -209,7 +209,7 @@ def test_random_three_stator_scenes_auto_against_full(r3, spin, theta, turn, I, 
 def test_random_three_stator_scenes_auto_against_full_spread():
     """Long version: 300 random examples (not derandomized; ~7 min); reports the spread of the never-averaged
     differences by the full model's stepper at t = 0 against NEVER_AVERAGED_L, NEVER_AVERAGED_THETA."""
-    from gyro_sim.simulate import Simulator
+    from gyro_sim.engine.simulate import Simulator
 
     never: dict = {}
 

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import gyro_sim
-from gyro_sim import sweep as sw
+from gyro_sim.apps import sweep as sw
 from gyro_sim.apps import sweep_exec  # (run_chunk and run_sweep live there: patch their names there)
-from gyro_sim.averaged import RotorK
+from gyro_sim.averaging.averaged import RotorK
 
 TINY = {"duration": 0.02, "output.rate": 500.0}
 METRICS = {"theta_end": "final(theta_deg)", "spin_end": "final_spin", "t_half": "time_below(theta_deg, 9.99)",
@@ -310,7 +310,7 @@ class Block:
         if name.split('.')[0] in ('dask', 'distributed', 'tqdm', 'pyarrow'):
             raise ImportError('blocked ' + name)
 sys.meta_path.insert(0, Block())
-from gyro_sim import sweep as sw
+from gyro_sim.apps import sweep as sw
 spec = sw.spec_from_dict({{'scene': 'nutation_oblate', 'set': {TINY!r}, 'vary': {{'controller.period': '0.001,0.002'}}}})
 res = sw.run_sweep(spec, workers=0, progress=True)
 assert [r['status'] for r in res.rows] == ['ok', 'ok'], res.rows
@@ -374,7 +374,7 @@ def test_tasks_are_batched_by_default():
 def test_task_sizer():
     """Variants per task: 1 until a run time is known; then TASK_SECONDS / the median run time, at most an even
     share of what is left over TASKS_AHEAD tasks per worker thread, never more than is left."""
-    from gyro_sim.sweep_tasks import TASKS_AHEAD, TaskSizer
+    from gyro_sim.apps.sweep_tasks import TASKS_AHEAD, TaskSizer
 
     t = TaskSizer(slots=2, task_seconds=0.25)
     assert t.next_size(128) == 1 and t.next_size(0) == 0
@@ -395,7 +395,8 @@ def test_kernels_called_from_python_release_the_gil():
     """The compiled kernels a run calls from Python release the GIL (``nogil=True``): in a Dask worker the event
     loop's thread then takes it without making the run's thread give it up (a run cost 2–5 % more CPU in a worker
     than in-process with them holding it, the same without)."""
-    from gyro_sim import frozen_flow, kernels
+    from gyro_sim.compiled import frozen_flow
+    from gyro_sim.compiled import kernels
 
     for k in (kernels.integrate, kernels.integrate_free, kernels.record_sample, frozen_flow.integrate_frozen):
         assert k.targetoptions.get("nogil") is True, k.py_func.__name__

@@ -1,5 +1,6 @@
 """gyro_sim.testing, the kit a user's own test suite uses to test a controller against the simulator (the
-``gyro_bench`` pytest fixture, registered through the ``pytest11`` entry point).
+``gyro_bench`` pytest fixture: an opt-in plugin, ``-p gyro_sim.testing`` or ``pytest_plugins``; test/conftest.py
+asks for it).
 
 The ROS tests here start real simulator / controller processes on a ROS domain of their own. Only outcomes are
 asserted, never timings (the machine is shared); every wait is bounded by the kit's startup_timeout / watchdog.
@@ -34,22 +35,49 @@ DONE = ("done: t = 0.5 s in 0.747 s wall (0.7x real time), 500 control ticks (66
 # --- without ROS --------------------------------------------------------------------------------
 
 def test_importing_the_plugin_is_cheap_and_rclpy_free():
-    """The pytest11 entry point names gyro_sim.testing; importing it (every pytest session does) adds neither
-    rclpy nor the recording / bag-reading code to what ``import gyro_sim`` loads."""
-    eps = [e for e in importlib.metadata.entry_points(group="pytest11") if e.name == "gyro_sim"]
-    # (an install made before the layers, issue 22, names the old path: the same module)
-    assert [e.value for e in eps] in (["gyro_sim.apps.testing"], ["gyro_sim.testing"])
+    """Importing gyro_sim.testing (a session that asks for the plugin does) adds neither rclpy nor the recording /
+    bag-reading code to what ``import gyro_sim`` loads."""
     code = ("import sys, gyro_sim; before = set(sys.modules); import gyro_sim.testing; "
             "print(' '.join(sorted(set(sys.modules) - before)))")
     new = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     pytest_own = ("_pytest", "pytest", "pluggy", "py", "iniconfig", "pygments")  # loaded in any pytest session
     print(f"\n  import gyro_sim.testing adds (beyond pytest's): "
           f"{' '.join(m for m in new if m.split('.')[0] not in pytest_own)}")
-    assert "gyro_sim.testing" in new
-    heavy = [m for m in new if m.split(".")[0] in ("rclpy", "rosbags", "mcap", "yaml", "matplotlib")
-             or m in ("gyro_sim.recording", "gyro_sim.ros", "gyro_sim.messages", "gyro_sim.io.recording",
-                      "gyro_sim.io.messages")]
+    assert "gyro_sim.apps.testing" in new
+    heavy = [m for m in new if m.split(".")[0] in ("rclpy", "rosbags", "mcap", "yaml", "matplotlib", "numba")
+             or m in ("gyro_sim.ros", "gyro_sim.io.recording", "gyro_sim.io.messages")]
     assert not heavy, heavy
+
+
+def test_the_plugin_is_opt_in():
+    """No pytest11 entry point: a pytest session on a machine with gyro_sim installed that does not ask for the plugin
+    imports nothing of gyro_sim (no numba, no import hook); one that asks (-p gyro_sim.testing) gets gyro_bench."""
+    assert not [e for e in importlib.metadata.entry_points(group="pytest11") if e.value.startswith("gyro_sim")]
+
+
+@pytest.mark.parametrize("ask", [False, True])
+def test_a_plain_pytest_session_imports_no_gyro_sim(tmp_path, ask):
+    (tmp_path / "test_plain.py").write_text(textwrap.dedent("""
+        import sys
+
+        def test_modules(request):
+            loaded = sorted(m for m in sys.modules if m.split(".")[0] in ("gyro_sim", "numba", "gyro_ctl"))
+            hooks = [type(f).__module__ for f in sys.meta_path if type(f).__module__.startswith("gyro_sim")]
+            print("LOADED", loaded, "HOOKS", hooks, "FIXTURE", "gyro_bench" in request.fixturenames
+                  or request.config.pluginmanager.hasplugin("gyro_sim.testing"))
+        """))
+    argv = [sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider", str(tmp_path / "test_plain.py")]
+    if ask:
+        argv[3:3] = ["-p", "gyro_sim.testing"]
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTEST_ADDOPTS", "PYTEST_PLUGINS")}
+    r = subprocess.run(argv, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    line = next(x for x in r.stdout.splitlines() if "LOADED" in x)
+    if ask:
+        assert "gyro_sim.apps.testing" in line and line.endswith("FIXTURE True"), line
+        assert "'numba'" not in line, line  # (even the plugin imports no numba until a run)
+    else:
+        assert line == "LOADED [] HOOKS [] FIXTURE False", line
 
 
 def test_parse_done_line():
@@ -122,9 +150,10 @@ def test_controller_spins_the_rotor_up(gyro_bench):
 
 def run_user_suite(directory: Path, files: dict, timeout: float = 900.0) -> subprocess.CompletedProcess:
     """Write ``files`` ({name: source}) into ``directory`` (outside the repo) and run pytest there in a fresh
-    process, as a user would (cwd = that directory, no cache). For example controllers too: a test file whose
-    controller command runs the example."""
+    process, as a user would (cwd = that directory, no cache), with the conftest.py that asks for the plugin (it is
+    opt-in). For example controllers too: a test file whose controller command runs the example."""
     directory.mkdir(parents=True, exist_ok=True)
+    files = {"conftest.py": 'pytest_plugins = ["gyro_sim.testing"]\n', **files}
     for name, text in files.items():
         (directory / name).write_text(text)
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}

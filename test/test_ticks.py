@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 import gyro_sim
 from gyro_ctl import laws
 from gyro_ctl.config import ControllerConfig
-from gyro_sim import simulate
-from gyro_sim.ticks import python_ticks
+from gyro_sim.engine import simulate
+from gyro_sim.engine.ticks import python_ticks
 
 NAMES = ("z1", "z2", "z3")
 AXES = np.eye(3)
@@ -237,7 +237,7 @@ def test_on_samples_get_the_same_rows(monkeypatch):
 def test_streamed_run_in_a_small_buffer():
     """A streamed run (drive with release) whose output buffer holds 7 rows: every chunk fits it, and the rows and
     commands handed over are the Python loop's."""
-    from gyro_sim.simulate import Runner, drive
+    from gyro_sim.engine.simulate import Runner, drive
 
     scene = gyro_sim.load_scene("nutation_oblate")
     out = {}
@@ -265,7 +265,7 @@ def test_streamed_run_in_a_small_buffer():
 
 def test_recorded_bag_is_the_python_loops(tmp_path):
     """record_run (streamed, samples as breaks) writes the bag the Python loop writes: the same samples and commands."""
-    from gyro_sim.recording import read_bag, record_run
+    from gyro_sim.io.recording import read_bag, record_run
 
     scene = gyro_sim.load_scene("nutation_oblate")
     with python_ticks():
@@ -297,8 +297,8 @@ def test_a_python_law_in_LAWS_runs_at_every_tick(monkeypatch):
 
 
 def test_a_first_lawson8_segment_in_the_tick_loop(monkeypatch):
-    """lawson8's table is made on first use (engine.model._tableau, re-exported by gyro_sim.simulate): a process whose first lawson8 segment is taken by
-    the compiled tick loop (nutation_slow at fidelity auto: its full-model stretch after the averaged one) ran into
+    """lawson8's table is made on first use (engine.model._tableau, re-exported by gyro_sim.engine.simulate): a
+    process whose first lawson8 segment is taken by the compiled tick loop (nutation_slow at fidelity auto: its full-model stretch after the averaged one) ran into
     a KeyError there (`gyro-sim bench --only ticks` in a new process); it must build the table and give the Python
     loop's numbers."""
     from gyro_sim.engine import model  # (the table's home: a name re-exported by simulate is a copy of the reference)

@@ -26,10 +26,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from pydantic import ValidationError
 
-from gyro_sim.messages import TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS, node_topic
+from gyro_sim.io.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS,
+                                  node_topic)
 from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
-from gyro_sim.scene import SceneError, load_scene
-from gyro_sim.simulate import stator_triad
+from gyro_sim.scenes.scene import SceneError, load_scene
+from gyro_sim.engine.simulate import stator_triad
 
 from ..config import LAW_NAMES, ControllerConfig, PsiSwitchingParams, SpinupParams, unknown_stators
 from .. import law_kernels
@@ -297,7 +298,7 @@ class ControllerNode(Node):
                          q=np.array([o.w, o.x, o.y, o.z]), omega_b=np.array([w.x, w.y, w.z]),
                          stator_names=self.names, stator_axes=self.axes)
         cmds = self.law(x)
-        # the command (gyro_sim.messages.command_message's content, filled directly: this is the per-tick path)
+        # the command (gyro_sim.io.messages.command_message's content, filled directly: this is the per-tick path)
         out = self._command_class()
         out.header.stamp = imu.header.stamp
         names = list(cmds)  # empty (law 'hold'): an empty command, which changes nothing
@@ -314,7 +315,7 @@ def _expected_time_constant(scene, cfg) -> str:
     """For spin-up: ', expected time constant T s' ([K] (2.1) at θ = 0: J3/(k_e B0²)), else ''."""
     if cfg.law != "spinup" or scene.rotor.conductor is None or scene.torque_model == "none":
         return ""
-    from gyro_sim.conductor import conductor_model
+    from gyro_sim.physics.conductor import conductor_model
 
     from ..laws import spinup_time_constant
 

@@ -2,13 +2,14 @@
 cost, measured in one run.
 
 * start-up: wall time of new processes (``subprocess``, the interpreter's own start included, numba's cache warm:
-  each is run once untimed first): ``python -c pass``, ``import gyro_sim``, ``from gyro_sim.simulate import run``,
+  each is run once untimed first): ``python -c pass``, ``import gyro_sim``,
+  ``from gyro_sim.engine.simulate import run``,
   the first run of the default scene and ``gyro-sim --help``; for the first run also, inside the process, the
   import, the first run and a second one (first − second = what a first run pays besides its integration: numba's
   set-up and the kernels' cache). With ``baseline`` (a source tree of the code before, e.g. ``git archive`` of a
   commit) the same processes run that code (``PYTHONPATH``, from a folder of their own) interleaved with this
   one's, so before and after meet the same load.
-* sweep: :func:`gyro_sim.sweep.measure` on a sweep of short runs (the default scene for 2 s, the control current
+* sweep: :func:`gyro_sim.apps.sweep.measure` on a sweep of short runs (the default scene for 2 s, the control current
   varied): runs/s in this process, on 1 and on all workers with one run per task and with tasks sized as they go
   (``batch="auto"``, the default), the cost of a run inside a worker against in-process (wall and its thread's
   CPU); and beside them two processes without Dask, each running half of the runs at once (the most 2 cores give).
@@ -37,8 +38,8 @@ __all__ = ["STARTUP_CASES", "startup_times", "startup_part", "sweep_spec", "two_
 _FIRST_RUN = """
 import json, time
 t0 = time.perf_counter()
-from gyro_sim.scene import load_scene
-from gyro_sim.simulate import run
+from gyro_sim.scenes.scene import load_scene
+from gyro_sim.engine.simulate import run
 t1 = time.perf_counter()
 sc = load_scene("spinup_thin_shell")
 r = run(sc, duration={duration!r})
@@ -53,9 +54,9 @@ print(json.dumps({{"import": t1 - t0, "first": t2 - t1, "again": t3 - t2, "compi
 STARTUP_CASES = (
     ("python alone", ["-c", "pass"]),
     ("import gyro_sim", ["-c", "import gyro_sim"]),
-    ("from gyro_sim.simulate import run", ["-c", "from gyro_sim.simulate import run"]),
+    ("from gyro_sim.engine.simulate import run", ["-c", "from gyro_sim.engine.simulate import run"]),
     ("first run of spinup_thin_shell", ["-c", _FIRST_RUN]),
-    ("gyro-sim --help", ["-m", "gyro_sim.cli", "--help"]),
+    ("gyro-sim --help", ["-m", "gyro_sim.apps.cli", "--help"]),
 )
 
 
@@ -157,7 +158,7 @@ def two_processes(spec, n: int = 2, repeats: int = 1) -> dict:
     items = [(v.run_id, v.values) for v in spec.variants()]
     parts = [items[i::n] for i in range(n)]
     payload = spec.payload()
-    code = ("import json, sys, time\nfrom gyro_sim.sweep import run_chunk\n"
+    code = ("import json, sys, time\nfrom gyro_sim.apps.sweep import run_chunk\n"
             "payload, items = json.loads(sys.stdin.readline())\nitems = [tuple(x) for x in items]\n"
             "run_chunk(payload, items[:1])\nprint('ready', flush=True)\n"
             "while sys.stdin.readline():\n"
@@ -189,12 +190,12 @@ def two_processes(spec, n: int = 2, repeats: int = 1) -> dict:
     return max(passes, key=lambda o: o["runs_per_s"])
 
 
-#: what the sweep part times (gyro_sim.sweep.MEASURE_CONFIGS): one run per task (the former default) and auto
+#: what the sweep part times (gyro_sim.apps.sweep.MEASURE_CONFIGS): one run per task (the former default) and auto
 SWEEP_CONFIGS = ("one_worker", "all_workers", "one_worker_auto", "all_workers_auto")
 
 
 def sweep_part(res, quick: bool = False, runs: Optional[int] = None, say=print) -> None:
-    """Fill ``res.sweep``: :func:`gyro_sim.sweep.measure` of :func:`sweep_spec` (128 runs of 2 s, the fastest of 3
+    """Fill ``res.sweep``: :func:`gyro_sim.apps.sweep.measure` of :func:`sweep_spec` (128 runs of 2 s, the fastest of 3
     passes of each; 48 runs, one pass in quick mode) on 2 workers (all cores if fewer), and :func:`two_processes` in
     each of its rounds (while the cluster idles)."""
     from gyro_sim.apps.sweep import measure

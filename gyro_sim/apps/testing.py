@@ -1,10 +1,10 @@
 """Test your controller against the simulator, in your own pytest suite.
 
-Installing gyro_sim registers this module as a pytest plugin (entry point ``pytest11``), so any test gets the
-:func:`gyro_bench` fixture: a :class:`GyroBench` working in the test's ``tmp_path``. A run starts the simulator
-node as a process (lockstep by default, recording a bag), on a ROS domain of its own (a free
-``ROS_DOMAIN_ID`` in 1–101, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), starts your controller — any command
-line — with the same environment (:attr:`GyroBench.env`), waits for the end of the run and gives a
+A pytest plugin, opt-in (``pytest -p gyro_sim.testing``, or ``pytest_plugins = ["gyro_sim.testing"]`` in a
+``conftest.py``; its public name is :mod:`gyro_sim.testing`): a test then gets the :func:`gyro_bench` fixture: a
+:class:`GyroBench` working in the test's ``tmp_path``. A run starts the simulator node as a process (lockstep by
+default, recording a bag), on a ROS domain of its own (a free ``ROS_DOMAIN_ID`` in 1–101,
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), starts your controller — any command line — with the same environment (:attr:`GyroBench.env`), waits for the end of the run and gives a
 :class:`BenchRun`: the run as a :class:`gyro_sim.simulate.RunResult` (the type :func:`gyro_sim.run` returns),
 the bag, the simulator's status lines and final figures::
 
@@ -19,8 +19,7 @@ A controller that never answers, or answers with the wrong stamps, fails the tes
 process the bench starts is ended at teardown (SIGINT to its process group, then SIGKILL), also when the test
 fails.
 
-This module imports neither rclpy nor the recording code at import time (the nodes run as processes; it is
-loaded in every pytest session of an environment where gyro_sim is installed).
+This module imports neither rclpy nor the recording code at import time (the nodes run as processes).
 """
 from __future__ import annotations
 

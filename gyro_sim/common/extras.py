@@ -4,7 +4,7 @@ The core (scenes, runs, recording, plots) needs none of them. A command or funct
 checks for it **before it does any work** and, where a module is missing, stops with one line naming the
 extra to install::
 
-    from gyro_sim.extras import require
+    from gyro_sim.common.extras import require
 
     require("live", "gyro-sim run --live")   # raises MissingExtra if foxglove is not importable
     # MissingExtra: gyro-sim run --live needs the 'live' extra: pip install 'gyro_sim[live]' (missing: foxglove)

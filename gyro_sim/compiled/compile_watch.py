@@ -2,7 +2,8 @@
 
 The compiled kernels are cached on disk (``cache=True``: next to the modules, or numba's user cache where the
 package directory is read-only, or ``NUMBA_CACHE_DIR``), so a scene's kernels compile once per install and
-Python version. When they do compile, the user sees one line (:func:`announce_compiles`) and
+Python version (an install compiles them at build time: build_support/precompile_kernels.py). When they do
+compile, the user sees a line, then one a kernel (:func:`announce_compiles`), and
 :class:`~gyro_sim.simulate.Runner` counts the time apart (``compile_time``), so the real-time factor of a first
 run is that of the integration alone.
 """
@@ -16,7 +17,8 @@ from typing import Callable, Literal, Optional, TextIO
 __all__ = ["compile_seconds", "announce_compiles", "CompileClock", "hold_interrupts_while_compiling"]
 
 _lock = threading.Lock()
-_state: dict = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False}
+_state: dict = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False,
+                "progress": None, "kernels": 0}
 
 
 def _install() -> None:
@@ -39,7 +41,14 @@ def _install() -> None:
             def on_end(self, ev):
                 _state["depth"] -= 1
                 if _state["depth"] == 0:
-                    _state["total"] += time.perf_counter() - _state["t0"]
+                    dt = time.perf_counter() - _state["t0"]
+                    _state["total"] += dt
+                    _state["kernels"] += 1
+                    say = _state["progress"]
+                    if say is not None:  # one line a kernel compiled (with the ones it calls)
+                        name = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__name__", "kernel")
+                        say(f"gyro_sim:   compiled {name} in {dt:.1f} s ({_state['kernels']} kernels, "
+                            f"{_state['total']:.1f} s so far; Ctrl-C stops after the kernel being compiled)")
 
         class _LockListener(event.Listener):
             """numba's compiler lock: held while it compiles or loads a kernel from its cache (LLVM calls back
@@ -98,19 +107,23 @@ def compile_seconds() -> float:
 
 
 def announce_compiles(stream: Optional[TextIO] = None, say: Optional[Callable[[str], None]] = None) -> None:
-    """At the first numba compile of this process, print one line saying what is happening (to ``stream``,
-    default stderr, or through ``say``)."""
-    text = ("gyro_sim: compiling the numba kernels this scene needs (first use with this install; cached on disk "
-            "for later runs); the real-time factor leaves this time out")
+    """At the first numba compile of this process, print one line saying what is happening, then one line a
+    kernel as each is compiled (progress: a compile takes seconds a kernel), to ``stream`` (default stderr) or
+    through ``say``. An install that compiled its kernels at build time (``pip install .``, colcon,
+    ``.ci/setup``: build_support/precompile_kernels.py) prints nothing."""
+    text = ("gyro_sim: compiling the numba kernels this scene needs (not compiled with this install: "
+            "`gyro-sim warmup` compiles them ahead; cached on disk for later runs); the real-time factor leaves "
+            "this time out")
 
-    def emit():
+    def emit(line: str) -> None:
         if say is not None:
-            say(text)
+            say(line)
         else:
-            print(text, file=stream or sys.stderr, flush=True)
+            print(line, file=stream or sys.stderr, flush=True)
 
     _install()
-    _state["announce"] = emit
+    _state["announce"] = lambda: emit(text)
+    _state["progress"] = emit
 
 
 class CompileClock:

@@ -561,7 +561,7 @@ def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, J
             j0 = 0
             t = t_stops[i]
         if record[i]:
-            record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, eff, cs, sn, F, work, out_y, out_N,
+            record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, None, cs, sn, F, work, out_y, out_N,
                           k_out, case)
             k_out += 1
     _pause(pos, t_stops.shape[0], 0, t)

@@ -461,7 +461,7 @@ def integrate_qs(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, J
             j0 = 0
             t = t_stops[i]
         if record[i]:
-            record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, 0, eff, cs, sn, F, work, out_y, out_N,
+            record_sample(t - t_seg, y, Bre, Bim, om, Jinv, c_m, w, tail, 0, None, cs, sn, F, work, out_y, out_N,
                           k_out, case)
             k_out += 1
     _pause(pos, t_stops.shape[0], 0, t)

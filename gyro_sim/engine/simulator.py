@@ -643,8 +643,9 @@ class Simulator:
             return F[0:3].copy()
         self.eff[effects.T0] = self.t
         out_N = np.zeros((1, 3))  # (record_sample: the steppers' own torque, compiled once for both)
+        eff = self.eff if self.eff[effects.ON] != 0.0 else None  # (None: as the frozen / quasi-static flow record)
         kernels.record_sample(0.0, self.y, Bre, Bim, om, self.Jinv, self.c_m, self.w, self.tail, self.tau.size,
-                              self.eff, np.empty(om.size), np.empty(om.size), F, np.zeros(25),
+                              eff, np.empty(om.size), np.empty(om.size), F, np.zeros(25),
                               np.empty((1, self.y.size)), out_N, 0, None)
         return out_N[0].copy()
 
