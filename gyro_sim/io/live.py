@@ -53,7 +53,8 @@ __all__ = ["LIVE_WHAT", "LiveUnavailable", "require_foxglove", "LiveView", "CHAN
 #: what needs the extra ``live``, in the one-line message of :func:`gyro_sim.extras.require`
 LIVE_WHAT = "gyro-sim run --live"
 
-#: the channels advertised at the start, in the order each sample logs them (``/gyro/effects`` comes on first use)
+#: the channels advertised at the start (``/gyro/effects`` comes on first use); a sample logs ``/tf_static`` first
+#: (the first sample, then about once a wall second), then the others in this order
 CHANNELS: tuple[str, ...] = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_TF,
                              TOPIC_TF_STATIC)
 #: the channels' message encoding and schema encoding: a bag's (rosbag2 MCAP) and foxglove_bridge's on ROS 2
@@ -129,6 +130,7 @@ class LiveView:
         except BaseException:
             self.server.stop()
             raise
+        self._port = self.relay.port
         self.channels: dict[str, Any] = {}
         for topic in CHANNELS:
             self._channel(topic)
@@ -140,7 +142,7 @@ class LiveView:
     @property
     def port(self) -> int:
         """The TCP port clients connect to (the relay's)."""
-        return self.relay.port
+        return self._port
 
     def _channel(self, topic: str):
         from gyro_sim.io.bag_format import ros2msg_schema
@@ -179,6 +181,10 @@ class LiveView:
         self._pace(t)
         ns = stamp_ns(t)
         msgs = state_messages(t, L, q, omega_b, euler, torque, self.names, current, rate, phase)
+        now = self._clock()
+        if self._static_sent is None or now - self._static_sent >= _RESEND_STATIC:  # (first, as in a bag)
+            self._log(TOPIC_TF_STATIC, self._static, ns)
+            self._static_sent = now
         for topic in _PER_SAMPLE:
             self._log(topic, msgs[topic], ns)
         eff = effects_message(t, effects) if effects else None
@@ -186,10 +192,6 @@ class LiveView:
             if TOPIC_EFFECTS not in self.channels:
                 self._channel(TOPIC_EFFECTS)
             self._log(TOPIC_EFFECTS, eff, ns)
-        now = self._clock()
-        if self._static_sent is None or now - self._static_sent >= _RESEND_STATIC:
-            self._log(TOPIC_TF_STATIC, self._static, ns)
-            self._static_sent = now
         self.server.broadcast_time(ns)
         self.samples_sent += 1
 

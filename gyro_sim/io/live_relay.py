@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from typing import Optional
 
 __all__ = ["SDK_SUBPROTOCOL", "WS_PROTOCOL_SUBPROTOCOL", "SUBPROTOCOLS", "SubprotocolRelay"]
 
@@ -36,16 +35,17 @@ class SubprotocolRelay:
 
     def __init__(self, host: str, port: int, upstream_port: int):
         from websockets.asyncio.server import serve
+        from websockets.typing import Subprotocol
 
         self._upstream = f"ws://127.0.0.1:{int(upstream_port)}"
         self._loop = asyncio.new_event_loop()
-        self._thread: Optional[threading.Thread] = threading.Thread(
-            target=self._loop.run_forever, name="gyro_sim live relay", daemon=True)
+        self._thread = threading.Thread(target=self._loop.run_forever, name="gyro_sim live relay", daemon=True)
+        self._closed = False
         self._thread.start()
 
         async def start():
-            return await serve(self._relay, host, port, subprotocols=list(SUBPROTOCOLS), compression=None,
-                               max_size=None)
+            return await serve(self._relay, host, port, subprotocols=[Subprotocol(p) for p in SUBPROTOCOLS],
+                               compression=None, max_size=None)
 
         try:
             self._server = asyncio.run_coroutine_threadsafe(start(), self._loop).result()
@@ -58,9 +58,10 @@ class SubprotocolRelay:
         """One client: open its connection to the SDK's server and copy frames both ways until either closes."""
         from websockets.asyncio.client import connect
         from websockets.exceptions import WebSocketException
+        from websockets.typing import Subprotocol
 
         try:
-            upstream = await connect(self._upstream, subprotocols=[SDK_SUBPROTOCOL], compression=None,
+            upstream = await connect(self._upstream, subprotocols=[Subprotocol(SDK_SUBPROTOCOL)], compression=None,
                                      max_size=None, proxy=None, open_timeout=_OPEN_TIMEOUT)
         except (OSError, asyncio.TimeoutError, WebSocketException) as exc:
             await client.close(1011, f"live view: the Foxglove server is not reachable ({exc})"[:120])
@@ -77,11 +78,11 @@ class SubprotocolRelay:
         self._loop.call_soon_threadsafe(self._loop.stop)
         self._thread.join()
         self._loop.close()
-        self._thread = None
+        self._closed = True
 
     def close(self) -> None:
         """Stop listening, disconnect the clients (close code 1001) and end the relay's thread."""
-        if self._thread is None:
+        if self._closed:
             return
 
         async def stop():

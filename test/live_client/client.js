@@ -4,16 +4,21 @@
 // message with the channel's advertised schema (ros2msg, parsed by @foxglove/rosmsg; CDR, read by
 // @foxglove/rosmsg2-serialization) and, once each topic named on the command line has N messages, unsubscribes,
 // closes and prints one JSON document on stdout:
-//   {subprotocol, serverInfo, channels: [advertised channel], messages: {topic: [[timestamp ns (string), message]]}}
-// Usage: node client.js ws://HOST:PORT N TOPIC[,TOPIC...]
+//   {subprotocol, serverInfo, channels: [advertised channel], messages: {topic: [[timestamp ns (string), message]]},
+//    scripts: {LAYOUT: [output]}}
+// where, for each Foxglove layout file given, `scripts` holds what its user script (TypeScript, compiled by
+// `typescript` as the app does) returned, fed the decoded messages of its input topics in the order received.
+// Usage: node client.js ws://HOST:PORT N TOPIC[,TOPIC...] [LAYOUT.json ...]
 // Exit status 1 with a message on stderr if the connection fails or closes first.
 "use strict";
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const { parse } = require("@foxglove/rosmsg");
 const { MessageReader } = require("@foxglove/rosmsg2-serialization");
+const fs = require("fs");
+const ts = require("typescript");
 const WebSocket = require("ws");
 
-const [url, nText, topicsText] = process.argv.slice(2);
+const [url, nText, topicsText, ...layouts] = process.argv.slice(2);
 const n = Number(nText);
 const wanted = topicsText.split(",");
 
@@ -22,6 +27,7 @@ const client = new FoxgloveClient({ ws });
 const channels = new Map(); // channel id -> {channel, reader}
 const subscriptions = new Map(); // subscription id -> topic
 const messages = {};
+const received = []; // [topic, message] in the order received
 let serverInfo;
 let done = false;
 
@@ -38,6 +44,26 @@ const fail = (text) => {
   process.stderr.write(`client: ${text}\n`);
   process.exit(1);
 };
+
+// the user scripts of a layout file run over the messages received: their outputs, in order
+function runScripts(path) {
+  const layout = JSON.parse(fs.readFileSync(path, "utf8"));
+  const outputs = [];
+  for (const node of Object.values(layout.userNodes ?? {})) {
+    const js = ts.transpileModule(node.sourceCode, {
+      compilerOptions: { module: ts.ModuleKind.CommonJS, target: ts.ScriptTarget.ES2020 },
+    }).outputText;
+    const mod = { exports: {} };
+    new Function("module", "exports", js)(mod, mod.exports);
+    const { inputs, default: script } = mod.exports;
+    for (const [topic, message] of received) {
+      if (!inputs.includes(topic)) continue;
+      const out = script({ topic, message });
+      if (out !== undefined) outputs.push(out);
+    }
+  }
+  return outputs;
+}
 
 client.on("serverInfo", (info) => {
   serverInfo = info;
@@ -57,7 +83,9 @@ client.on("advertise", (advertised) => {
 client.on("message", ({ subscriptionId, timestamp, data }) => {
   const topic = subscriptions.get(subscriptionId);
   const { reader } = [...channels.values()].find((c) => c.channel.topic === topic);
-  messages[topic].push([timestamp.toString(), reader.readMessage(data)]);
+  const message = reader.readMessage(data);
+  messages[topic].push([timestamp.toString(), message]);
+  received.push([topic, message]);
   if (!done && wanted.every((t) => (messages[t] ?? []).length >= n)) {
     done = true;
     for (const id of subscriptions.keys()) client.unsubscribe(id);
@@ -66,6 +94,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
       serverInfo,
       channels: [...channels.values()].map((c) => c.channel),
       messages,
+      scripts: Object.fromEntries(layouts.map((path) => [path, runScripts(path)])),
     };
     process.stdout.write(JSON.stringify(out, plain) + "\n", () => {
       client.close();
