@@ -68,7 +68,8 @@ class _LiveRun:
                tmp_path / "out", "--quiet", "--live", "--live-port", "0", "--live-wait", str(len(CHANNELS)),
                "--live-hold", "600", "--rate-factor", "10"] + (["--record", record] if record else [])
         self.proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True, cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+                                     text=True, cwd=tmp_path, env=dict(os.environ, PYTHONPATH=os.pathsep.join(
+                                         [str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p])))
         self.lines: queue.Queue = queue.Queue()
         self.seen: list = []
         threading.Thread(target=_lines, args=(self.proc.stderr, self.lines), daemon=True).start()
