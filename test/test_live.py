@@ -410,3 +410,27 @@ def test_pacing_follows_the_rate_factor_on_a_fake_clock():
         lv.publish(0.8, [0, 0, 1.0], q, z3, z3, z3, z3, z3, z3)
         assert slept[2:] == pytest.approx([0.05])
         assert lv.samples_sent == 5 and lv.port > 0
+
+
+def test_relay_accepts_both_protocol_names_and_refuses_others():
+    """The port a client reaches takes foxglove.sdk.v1 (preferred when both are offered) and
+    foxglove.websocket.v1, and refuses another or none with HTTP 400, as foxglove-sdk's own server (behind it)
+    refuses foxglove.websocket.v1."""
+    pytest.importorskip("foxglove", reason="the extra 'live' (pip install '.[live]') is not installed")
+    import gyro_sim
+    from gyro_sim.io.live import LiveView
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    with LiveView(gyro_sim.load_scene(SCENE), port=0) as lv:
+        url = f"ws://127.0.0.1:{lv.port}"
+        for offer, agreed in (([WS_V1], WS_V1), ([SDK_V1], SDK_V1), ([WS_V1, SDK_V1], SDK_V1)):
+            with connect(url, subprotocols=offer, proxy=None, open_timeout=RECV_TIMEOUT) as ws:
+                assert ws.subprotocol == agreed
+                assert json.loads(ws.recv(timeout=RECV_TIMEOUT))["op"] == "serverInfo"
+        for offer in (None, ["foxglove.websocket.v2"]):
+            with pytest.raises(InvalidStatus, match="HTTP 400"):
+                connect(url, subprotocols=offer, proxy=None, open_timeout=RECV_TIMEOUT)
+        assert lv.server.port != lv.port
+        with pytest.raises(InvalidStatus, match="HTTP 400"):  # (the SDK's server: foxglove.sdk.v1 only)
+            connect(f"ws://127.0.0.1:{lv.server.port}", subprotocols=[WS_V1], proxy=None, open_timeout=RECV_TIMEOUT)
