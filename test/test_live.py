@@ -272,9 +272,19 @@ def test_npm_ws_protocol_client_decodes_the_live_view_and_runs_the_layout(tmp_pa
         outs = got["scripts"][str(path)][:n]
         s = np.array([[math.nan if v is None else v for v in o["slip"]] for o in outs])
         np.testing.assert_allclose(s, want, rtol=1e-9, atol=1e-9, err_msg=str(path))
-    mine = json.loads(layout.read_text(encoding="utf-8"))["configById"]
+    mine = json.loads(layout.read_text(encoding="utf-8"))
     for panel in ("Plot!slip", "Plot!currents"):
-        assert [p["label"] for p in mine[panel]["paths"]] == names, panel
+        assert [p["label"] for p in mine["configById"][panel]["paths"]] == names, panel
+    # the scripts type-check as strict TypeScript (the app reports a script's type errors instead of running it)
+    sources = []
+    for i, path in enumerate((layout, LAYOUT)):
+        (node,) = json.loads(path.read_text(encoding="utf-8"))["userNodes"].values()
+        sources.append(tmp_path / f"script{i}.ts")
+        sources[-1].write_text(node["sourceCode"], encoding="utf-8")
+    tsc = npm_client.parent / "node_modules" / "typescript" / "bin" / "tsc"
+    r = subprocess.run(["node", str(tsc), "--strict", "--noEmit", "--noUnusedLocals", "--target", "ES2020", "--lib",
+                        "ES2020"] + [str(p) for p in sources], capture_output=True, text=True, timeout=RECV_TIMEOUT)
+    assert r.returncode == 0, r.stdout + r.stderr
 
 
 def _panels(node) -> list:
