@@ -64,7 +64,7 @@ class _LiveRun:
     def __init__(self, tmp_path, scene, duration, record=None):
         from gyro_sim.io.live import CHANNELS
 
-        cmd = [sys.executable, "-m", "gyro_sim.cli", "run", scene, "--duration", str(duration), "--out",
+        cmd = [sys.executable, "-m", "gyro_sim.apps.cli", "run", scene, "--duration", str(duration), "--out",
                tmp_path / "out", "--quiet", "--live", "--live-port", "0", "--live-wait", str(len(CHANNELS)),
                "--live-hold", "600", "--rate-factor", "10"] + (["--record", record] if record else [])
         self.proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -375,9 +375,9 @@ def test_live_without_foxglove_is_one_line_before_any_work(tmp_path):
     (tmp_path / "site").mkdir()
     (tmp_path / "site/sitecustomize.py").write_text("import sys\nsys.modules['foxglove'] = None\n")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path / "site"), str(ROOT)]))
-    r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", SCENE, "--live", "--out", str(tmp_path / "out"),
-                        "--record", str(tmp_path / "bag")], capture_output=True, text=True, timeout=300,
-                       cwd=tmp_path, env=env)
+    r = subprocess.run([sys.executable, "-m", "gyro_sim.apps.cli", "run", SCENE, "--live", "--out",
+                        str(tmp_path / "out"), "--record", str(tmp_path / "bag")], capture_output=True, text=True,
+                       timeout=300, cwd=tmp_path, env=env)
     assert (r.returncode, r.stderr.splitlines()) == (
         2, ["error: gyro-sim run --live needs the 'live' extra: pip install 'gyro_sim[live]' (missing: foxglove)"]), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]  # nothing was run or written
@@ -390,7 +390,7 @@ def test_live_without_foxglove_is_one_line_before_any_work(tmp_path):
     (["--fidelity", "auto"], "error: --fidelity auto: --live streams the full model's samples"),
 ])
 def test_live_bad_usage_is_one_line(tmp_path, capsys, extra, message):
-    from gyro_sim.cli import main
+    from gyro_sim.apps.cli import main
 
     assert main(["run", SCENE, "--live", "--out", str(tmp_path / "out"), *extra]) == 2
     err = capsys.readouterr().err.splitlines()
@@ -401,7 +401,7 @@ def test_live_bad_usage_is_one_line(tmp_path, capsys, extra, message):
 def test_pacing_follows_the_rate_factor_on_a_fake_clock():
     pytest.importorskip("foxglove", reason="the extra 'live' (pip install '.[live]') is not installed")
     import gyro_sim
-    from gyro_sim.live import LiveView
+    from gyro_sim.io.live import LiveView
 
     now = [100.0]
     slept = []
