@@ -126,8 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with --ros --mode realtime, or --live: simulated seconds per wall second (default 1)")
     run.add_argument("--live", action="store_true",
                      help="serve the run over the Foxglove WebSocket protocol while it runs, paced to the wall clock "
-                          "x --rate-factor (in-process; needs pip install 'gyro_sim[live]'; layout: "
-                          "config/foxglove_layout.json)")
+                          "x --rate-factor (in-process; needs pip install 'gyro_sim[live]'; the scene's Foxglove "
+                          "layout is written to OUT/SCENE_foxglove_layout.json; docs/live.md)")
     run.add_argument("--live-host", metavar="HOST", default="127.0.0.1",
                      help="with --live: address to listen on (default 127.0.0.1: this machine only)")
     run.add_argument("--live-port", metavar="N", type=int, default=8765,

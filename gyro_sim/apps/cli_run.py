@@ -71,17 +71,23 @@ def _live_usage(args):
     return None
 
 
-def _start_live(args, scene):
-    """The live view's server (gyro_sim.live.LiveView), announced on stderr; (None, error text) if it cannot
-    listen. Waits for --live-wait subscriptions."""
+def _start_live(args, scene, name):
+    """The live view's server (gyro_sim.live.LiveView), announced on stderr with the scene's Foxglove layout
+    (written to OUT/<name>_foxglove_layout.json); (None, error text) if it cannot listen or write the layout.
+    Waits for --live-wait subscriptions."""
+    from gyro_sim.io.foxglove_layout import write_layout
     from gyro_sim.io.live import LiveView
-    from gyro_sim.scenes.scene import config_dir
 
     try:
         live = LiveView(scene, host=args.live_host, port=args.live_port, rate_factor=args.rate_factor)
-    except Exception as exc:  # (the SDK's error for an address in use or not resolvable)
+    except Exception as exc:  # (an address in use or not resolvable)
         return None, f"--live: cannot listen on {args.live_host}:{args.live_port}: {exc}"
-    layout = config_dir() / "foxglove_layout.json"
+    layout = Path(args.out) / f"{name}_foxglove_layout.json"
+    try:
+        write_layout(scene, layout)
+    except OSError as exc:
+        live.close()
+        return None, f"cannot write the Foxglove layout {layout}: {exc.strerror or exc}"
     _write(sys.stderr, f"live view: ws://{args.live_host}:{live.port} (Foxglove: Open connection > Foxglove WebSocket; "
                        f"layout {layout}), {args.rate_factor:g}x real time\n")
     sys.stderr.flush()
@@ -146,7 +152,7 @@ def _cmd_run(args) -> int:
         on_samples = progress
         if args.live:
             with sigterm_as_interrupt():  # (Ctrl-C / SIGTERM while waiting for --live-wait)
-                live, bad = _start_live(args, scene)
+                live, bad = _start_live(args, scene, name)
             if bad:
                 return _error(bad)
 

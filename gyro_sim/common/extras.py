@@ -24,7 +24,7 @@ __all__ = ["EXTRAS", "MissingExtra", "extra_of", "missing", "missing_message", "
 EXTRAS: dict[str, tuple[str, ...]] = {
     "ros": ("rclpy",),
     "sweep": ("dask", "distributed", "pyarrow"),  # (tqdm too, but a sweep without it runs, without a progress bar)
-    "live": ("foxglove",),  # the foxglove-sdk distribution
+    "live": ("foxglove", "websockets"),  # foxglove-sdk (the server) and websockets (its relay: gyro_sim.io.live_relay)
     "data": ("pandas", "xarray"),
     "docs": ("pdoc",),
 }

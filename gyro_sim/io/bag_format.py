@@ -62,3 +62,22 @@ def _typestore():
 
         _TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
     return _TYPESTORE
+
+
+def ros2msg_schema(topic: str) -> tuple[str, str]:
+    """(type name, ``ros2msg`` definition text) of a topic's messages, as a bag's MCAP schema record holds them
+    (rosbags' writer: the type's .msg text followed by its dependencies') and as the live view advertises them."""
+    from gyro_sim.io.messages import TOPICS
+
+    msgtype = TOPICS[topic]
+    return msgtype, _typestore().generate_msgdef(msgtype, ros_version=2)[0]
+
+
+def cdr_message(topic: str, fields: dict) -> memoryview:
+    """A topic's message, given as a builder's dict (:mod:`gyro_sim.io.messages`), serialized as CDR (little
+    endian, with its 4-byte encapsulation header), byte for byte as a bag stores it and the live view sends it."""
+    from gyro_sim.io.messages import TOPICS, to_rosbags
+
+    msgtype = TOPICS[topic]
+    ts = _typestore()
+    return ts.serialize_cdr(to_rosbags(ts, msgtype, fields), msgtype)

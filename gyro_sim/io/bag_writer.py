@@ -16,13 +16,12 @@ import yaml
 
 from gyro_sim import __version__
 from gyro_sim.io.bag_format import (  # noqa: F401 (RESERVE_NAME: re-exported)
-    _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, write_chunk_crcs,
+    _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, cdr_message, write_chunk_crcs,
 )
 from gyro_sim.io.messages import (
     QOS, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_SCENE,
     TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPIC_TF_STATIC, TOPICS,
     command_message, effects_message, scene_message, stamp_ns, state_messages, status_message, tf_static_message,
-    to_rosbags,
 )
 from gyro_sim.io.signals import RunInterrupted, _held_signals, _signals_deferred
 
@@ -170,7 +169,6 @@ class BagRecorder:
         check_write_target(path)
         self.path = path
         ts = _typestore()
-        self._ts = ts
         writer = Writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         for k, v in custom.items():
             writer.set_custom_data(k, v)
@@ -377,8 +375,7 @@ class BagRecorder:
 
     # --- writing
     def _serialize(self, topic: str, fields: dict) -> memoryview:
-        msgtype = TOPICS[topic]
-        return self._ts.serialize_cdr(to_rosbags(self._ts, msgtype, fields), msgtype)
+        return cdr_message(topic, fields)
 
     def _write(self, ns: int, items: Sequence[tuple[str, Any]], t_sample: Optional[float] = None) -> None:
         """Write serialized (topic, data) pairs at log time ns (all or, on a bad argument, none); ``t_sample``:

@@ -1,29 +1,33 @@
 """The live view: a run served over the Foxglove WebSocket protocol while it runs (``gyro-sim run SCENE --live``).
 
-The server is the ``foxglove-sdk`` package (the optional extra ``live``: ``pip install 'gyro_sim[live]'``); the
-Foxglove app connects to ``ws://HOST:PORT`` ("Open connection" → "Foxglove WebSocket") and shows the run with
-``config/foxglove_layout.json``.
+The server is the ``foxglove-sdk`` package (the optional extra ``live``: ``pip install 'gyro_sim[live]'``),
+behind :class:`gyro_sim.io.live_relay.SubprotocolRelay`, so both names of the protocol are accepted:
+``foxglove.sdk.v1`` (the Foxglove app) and ``foxglove.websocket.v1`` (the ws-protocol clients: the npm
+``@foxglove/ws-protocol``, Lichtblick). The Foxglove app connects to ``ws://HOST:PORT`` ("Open connection" →
+"Foxglove WebSocket") and shows the run with a layout of :mod:`gyro_sim.io.foxglove_layout`. docs/live.md is the
+user's guide.
 
-Channels carry the bag's topic names and, but for ``/tf`` and ``/tf_static``, the bag's message fields (the
-dicts of :func:`gyro_sim.messages.state_messages`, JSON-encoded, each with a JSON schema named after its ROS 2
-type), so one layout, with the same message paths, serves a live run, a recorded bag and ``foxglove_bridge`` on
-the ROS nodes:
+Channels carry the bag's topics in the bag's encoding: each message CDR-encoded by the same serializer
+(:func:`gyro_sim.io.bag_format.cdr_message`, byte for byte as in a bag) under the same ``ros2msg`` schema (type
+name and text as the bag's MCAP schema record), as ``foxglove_bridge`` serves the ROS nodes' topics; so one
+layout, with the same message paths, serves a live run, a recorded bag and the bridge:
 
-====================== ================================ ======================================================
-channel                schema (JSON)                    content (SI units; frames as in gyro_sim.messages)
-====================== ================================ ======================================================
-``/gyro/imu``          sensor_msgs/msg/Imu              orientation = attitude body → case (x, y, z, w);
-                                                        angular_velocity = Ω_b (body, rad/s): ``.z`` = spin
+======================== ================================ ====================================================
+channel                  schema (ros2msg)                 content (SI units; frames as in gyro_sim.io.messages)
+======================== ================================ ====================================================
+``/gyro/imu``            sensor_msgs/msg/Imu              orientation = attitude body → case (x, y, z, w);
+                                                          angular_velocity = Ω_b (body, rad/s): ``.z`` = spin
 ``/gyro/kinetic_moment`` geometry_msgs/msg/Vector3Stamped L, frame gyro_case, N·m·s
-``/gyro/euler``        geometry_msgs/msg/Vector3Stamped x = ψ, y = θ, z = φ of the body in the L-frame, rad
-``/gyro/torque``       geometry_msgs/msg/Vector3Stamped electrodynamic torque, frame gyro_case, N·m
-``/gyro/stators``      sensor_msgs/msg/JointState       effort = current A, velocity = signed field rate
-                                                        rad/s, position = field phase rad
-``/gyro/effects``      sensor_msgs/msg/JointState       internal bodies, only for scenes that have one
-``/tf``                foxglove.FrameTransforms         gyro_case → gyro_rotor (the attitude, a pure rotation)
-                                                        and gyro_case → gyro_l_frame, each sample
-``/tf_static``         foxglove.FrameTransforms         gyro_case → gyro_stator_<name>, about once a wall s
-====================== ================================ ======================================================
+``/gyro/euler``          geometry_msgs/msg/Vector3Stamped x = ψ, y = θ, z = φ of the body in the L-frame, rad
+``/gyro/torque``         geometry_msgs/msg/Vector3Stamped electrodynamic torque, frame gyro_case, N·m
+``/gyro/stators``        sensor_msgs/msg/JointState       effort = current A, velocity = signed field rate
+                                                          rad/s, position = field phase rad
+``/gyro/effects``        sensor_msgs/msg/JointState       internal bodies, only for scenes that have one
+``/tf``                  tf2_msgs/msg/TFMessage           gyro_case → gyro_rotor (the attitude, a pure rotation)
+                                                          and gyro_case → gyro_l_frame, each sample
+``/tf_static``           tf2_msgs/msg/TFMessage           gyro_case → gyro_stator_<name> (the stator's triad
+                                                          e1, e2, u), about once a wall s
+======================== ================================ ====================================================
 
 Message times (the protocol's ``timestamp``, the app's receive time) and the server time (``Time`` capability)
 are the simulation time in ns, as the bags' log times. Pacing: sample t is sent at wall time
@@ -41,31 +45,23 @@ from typing import Any, Optional
 
 from gyro_sim.common.extras import MissingExtra, require
 from gyro_sim.io.messages import (TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATORS,
-                       TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, effects_message, stamp_ns, state_messages)
+                                  TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, effects_message, stamp_ns, state_messages)
 
-__all__ = ["LIVE_WHAT", "LiveUnavailable", "require_foxglove", "LiveView", "CHANNELS", "json_schema",
-           "frame_transforms"]
+__all__ = ["LIVE_WHAT", "LiveUnavailable", "require_foxglove", "LiveView", "CHANNELS", "MESSAGE_ENCODING",
+           "SCHEMA_ENCODING"]
 
 #: what needs the extra ``live``, in the one-line message of :func:`gyro_sim.extras.require`
 LIVE_WHAT = "gyro-sim run --live"
 
-#: the channels advertised at the start, in the order each sample logs them (``/gyro/effects`` comes on first use)
+#: the channels advertised at the start (``/gyro/effects`` comes on first use); a sample logs ``/tf_static`` first
+#: (the first sample, then about once a wall second), then the others in this order
 CHANNELS: tuple[str, ...] = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_TF,
                              TOPIC_TF_STATIC)
-_SAME_AS_BAG = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS)
+#: the channels' message encoding and schema encoding: a bag's (rosbag2 MCAP) and foxglove_bridge's on ROS 2
+MESSAGE_ENCODING, SCHEMA_ENCODING = "cdr", "ros2msg"
+_PER_SAMPLE = (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_TF)
 _RESEND_STATIC = 1.0  # wall s between /tf_static messages (a client that subscribes late gets the stator frames)
 _SLIP = 0.25  # wall s behind the pacing clock after which the clock slips instead of the run catching up
-
-#: foxglove.FrameTransforms as a JSON schema (https://docs.foxglove.dev/docs/sdk/schemas/frame-transforms)
-_VEC = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
-_QUAT = {"type": "object", "properties": {k: {"type": "number"} for k in "xyzw"}}
-_TIME = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
-FRAME_TRANSFORMS_SCHEMA = {
-    "title": "foxglove.FrameTransforms", "type": "object",
-    "properties": {"transforms": {"type": "array", "items": {
-        "title": "foxglove.FrameTransform", "type": "object",
-        "properties": {"timestamp": _TIME, "parent_frame_id": {"type": "string"},
-                       "child_frame_id": {"type": "string"}, "translation": _VEC, "rotation": _QUAT}}}}}
 
 
 #: foxglove-sdk cannot be imported (the extra ``live`` is not installed): gyro_sim.extras' one-line error
@@ -83,46 +79,6 @@ def require_foxglove():
         raise MissingExtra(f"{LIVE_WHAT} needs foxglove-sdk with its WebSocket server ({e}): "
                            "pip install --upgrade 'gyro_sim[live]'", "live", ("foxglove",)) from None
     return foxglove
-
-
-def json_schema(example: Any, title: Optional[str] = None) -> dict:
-    """A JSON schema (types only) describing ``example``, a message as plain dicts, lists, numbers, strings."""
-    if isinstance(example, dict):
-        out = {"type": "object", "properties": {k: json_schema(v) for k, v in example.items()}}
-        return {"title": title, **out} if title else out
-    if isinstance(example, (list, tuple)):
-        return {"type": "array", "items": json_schema(example[0]) if example else {"type": "number"}}
-    if isinstance(example, bool):
-        return {"type": "boolean"}
-    if isinstance(example, int):
-        return {"type": "integer"}
-    if isinstance(example, float):
-        return {"type": "number"}
-    return {"type": "string"}
-
-
-def _finite(value: Any) -> Any:
-    """``value`` with every non-finite float as None (JSON has no NaN)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    return value
-
-
-def frame_transforms(tf: dict) -> dict:
-    """A ``tf2_msgs/TFMessage`` dict (:func:`gyro_sim.messages.state_messages`) as ``foxglove.FrameTransforms``:
-    the same transforms (parent ← child, translation m, rotation x, y, z, w child → parent), stamps as sec/nsec."""
-    out = []
-    for tr in tf["transforms"]:
-        st = tr["header"]["stamp"]
-        out.append({"timestamp": {"sec": st["sec"], "nsec": st["nanosec"]},
-                    "parent_frame_id": tr["header"]["frame_id"], "child_frame_id": tr["child_frame_id"],
-                    "translation": dict(tr["transform"]["translation"]),
-                    "rotation": dict(tr["transform"]["rotation"])})
-    return {"transforms": out}
 
 
 class _Subscriptions:
@@ -160,33 +116,40 @@ class LiveView:
         fox = require_foxglove()
         from foxglove.websocket import Capability
 
+        from gyro_sim.io.live_relay import SubprotocolRelay
         from gyro_sim.io.recording import stator_frames
 
         self._fox, self.rate_factor, self._clock, self._sleep = fox, float(rate_factor), clock, sleep
         self.names = [st.name for st in scene.stators]
         self.subs = _Subscriptions()
-        self.server = fox.start_server(name=f"gyro_sim: {scene.name}", host=host, port=port,
+        # the SDK's server on this machine only; clients reach it through the relay, under either subprotocol
+        self.server = fox.start_server(name=f"gyro_sim: {scene.name}", host="127.0.0.1", port=0,
                                        capabilities=[Capability.Time], server_listener=self.subs)
+        try:
+            self.relay: Optional[SubprotocolRelay] = SubprotocolRelay(host, port, self.server.port)
+        except BaseException:
+            self.server.stop()
+            raise
+        self._port = self.relay.port
         self.channels: dict[str, Any] = {}
-        n = len(self.names)
-        example = state_messages(0.0, [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3, [0.0] * 3,
-                                 self.names, [0.0] * n, [0.0] * n, [0.0] * n)
-        for topic in _SAME_AS_BAG:
-            self._channel(topic, json_schema(example[topic], TOPICS[topic]))
-        self._channel(TOPIC_TF, FRAME_TRANSFORMS_SCHEMA)
-        self._channel(TOPIC_TF_STATIC, FRAME_TRANSFORMS_SCHEMA)
-        self._static = frame_transforms(stator_frames(scene))
+        for topic in CHANNELS:
+            self._channel(topic)
+        self._static = stator_frames(scene)
         self._static_sent: Optional[float] = None
         self._origin: Optional[tuple[float, float]] = None  # (wall s, simulated s) of the pacing clock
         self.samples_sent = 0
 
     @property
     def port(self) -> int:
-        """The TCP port the server listens on."""
-        return self.server.port
+        """The TCP port clients connect to (the relay's)."""
+        return self._port
 
-    def _channel(self, topic: str, schema: dict):
-        self.channels[topic] = self._fox.Channel(topic, schema=schema, message_encoding="json")
+    def _channel(self, topic: str):
+        from gyro_sim.io.bag_format import ros2msg_schema
+
+        name, text = ros2msg_schema(topic)
+        schema = self._fox.Schema(name=name, encoding=SCHEMA_ENCODING, data=text.encode("utf-8"))
+        self.channels[topic] = self._fox.Channel(topic, schema=schema, message_encoding=MESSAGE_ENCODING)
         return self.channels[topic]
 
     def wait_for_subscriptions(self, n: int, poll: float = 0.2) -> None:
@@ -196,7 +159,9 @@ class LiveView:
                 self.subs.changed.wait(poll)  # (a timeout: signals are handled between waits)
 
     def _log(self, topic: str, msg: dict, ns: int) -> None:
-        self.channels[topic].log(_finite(msg), log_time=ns)
+        from gyro_sim.io.bag_format import cdr_message
+
+        self.channels[topic].log(bytes(cdr_message(topic, msg)), log_time=ns)
 
     def _pace(self, t: float) -> None:
         """Sleep until simulated time ``t`` is due on the wall clock (× rate_factor)."""
@@ -216,18 +181,17 @@ class LiveView:
         self._pace(t)
         ns = stamp_ns(t)
         msgs = state_messages(t, L, q, omega_b, euler, torque, self.names, current, rate, phase)
-        for topic in _SAME_AS_BAG:
+        now = self._clock()
+        if self._static_sent is None or now - self._static_sent >= _RESEND_STATIC:  # (first, as in a bag)
+            self._log(TOPIC_TF_STATIC, self._static, ns)
+            self._static_sent = now
+        for topic in _PER_SAMPLE:
             self._log(topic, msgs[topic], ns)
-        self._log(TOPIC_TF, frame_transforms(msgs[TOPIC_TF]), ns)
         eff = effects_message(t, effects) if effects else None
         if eff is not None:
             if TOPIC_EFFECTS not in self.channels:
-                self._channel(TOPIC_EFFECTS, json_schema(eff, TOPICS[TOPIC_EFFECTS]))
+                self._channel(TOPIC_EFFECTS)
             self._log(TOPIC_EFFECTS, eff, ns)
-        now = self._clock()
-        if self._static_sent is None or now - self._static_sent >= _RESEND_STATIC:
-            self._log(TOPIC_TF_STATIC, self._static, ns)
-            self._static_sent = now
         self.server.broadcast_time(ns)
         self.samples_sent += 1
 
@@ -249,6 +213,9 @@ class LiveView:
 
     def close(self) -> None:
         """Stop the server (clients are disconnected); idempotent."""
+        if self.relay is not None:
+            self.relay.close()
+            self.relay = None
         if self.server is not None:
             self.server.stop()
             self.server = None
