@@ -369,6 +369,7 @@ MODULE_KEYS = {
     "mcap": None, "tqdm": "python3-tqdm", "dask": None, "distributed": None, "pyarrow": None,
     "pandas": "python3-pandas", "xarray": None,
     "foxglove": None,  # foxglove-sdk (the extra 'live')
+    "websockets": "python3-websockets",  # the live view's relay (the extra 'live': gyro_sim/io/live_relay.py)
     "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
     "pdoc": None,  # the 'docs' extra (gyro_sim/api_docs.py)
 }
@@ -469,7 +470,7 @@ def test_manifest_declares_setup_requirements():
     req = setup_requirements()
     run_deps, test_deps = names(pkg.exec_depends), names(pkg.test_depends)
     for extra, deps in (("", run_deps), ("ros", run_deps), ("sweep", run_deps), ("data", run_deps),
-                        ("test", test_deps)):
+                        ("live", run_deps), ("test", test_deps)):
         for r in req[extra]:
             if extra == "test" and (Requirement(r).name.startswith("colcon-") or Requirement(r).name == "tomli"):
                 continue  # the build tool; the TOML reader of Python < 3.11 (tomllib of a ROS distribution's)
