@@ -1,4 +1,4 @@
-"""The live view (``gyro-sim run SCENE --live``, gyro_sim/live.py) and the Foxglove layout (config/
+"""The live view (``gyro-sim run SCENE --live``, gyro_sim/io/live.py) and the Foxglove layout (config/
 foxglove_layout.json).
 
 A test client speaks the Foxglove WebSocket protocol (https://github.com/foxglove/ws-protocol) to a live run in a

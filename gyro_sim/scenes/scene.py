@@ -71,9 +71,9 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       method: auto                   # lawson8 | etdrk4 | frozen_flow | qs_flow | auto: qs_flow or frozen_flow
                                      # where it applies and pays, else lawson8 unless an eddy mode is stiff
                                      # (h > 2τ_n), then etdrk4; frozen_flow: steps longer than a field turn
-                                     # (axisymmetric rotor, no effects; gyro_sim/frozen_flow.py,
+                                     # (axisymmetric rotor, no effects; gyro_sim/compiled/frozen_flow.py,
                                      # docs/numerics.md); qs_flow: the same for the quasi-static torque, third
-                                     # order (gyro_sim/qs_flow.py)
+                                     # order (gyro_sim/compiled/qs_flow.py)
       steps_per_turn: null           # lawson8/etdrk4: steps per period of the fastest rotation (spin or
                                      # field); free stepper: per turn of the body-frame motion; default:
                                      # chosen from accuracy and the run's turns (a number here wins, with a
@@ -86,9 +86,9 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       period: 0.001                  # s (default: the output period)
       params: {nu: 300.0, control_current: 1.0, spin_current: 1.0, spin_rate: 3000.0}
 
-    fidelity: full                   # full | averaged | auto (gyro_sim/fidelity.py)
+    fidelity: full                   # full | averaged | auto (gyro_sim/engine/fidelity.py)
     effects: {}                      # unbalance, gas_drag, magnetizable, flywheel, damper
-                                     # (gyro_sim/effect_config.py; all off by default)
+                                     # (gyro_sim/scenes/effect_config.py; all off by default)
 
 Physical limits (gyro_sim/scenes/limits.py): every field amplitude b_k I_k and field term at most 100 T, every
 rate and the initial body rate at most 1e7 rad/s, J_max/J_min at most ``max_inertia_ratio``; commands (in-process,
@@ -371,7 +371,7 @@ class Integrator(_Strict):
     method: Literal["auto", "lawson8", "etdrk4", "frozen_flow", "qs_flow"] = "auto"
     """Time stepper: auto (chosen per scene), lawson8, etdrk4 (stiff eddy modes), frozen_flow or qs_flow (long steps,
     axisymmetric rotor)."""
-    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: from accuracy (gyro_sim/accuracy.py)
+    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: from accuracy (gyro_sim/scenes/accuracy.py)
     """Steps per period of the fastest rotation (spin or field), a count; None: chosen from accuracy."""
     rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow, qs_flow; default: from accuracy
     """frozen_flow, qs_flow: largest change of the body rate per step as a fraction of the fastest rate
