@@ -219,7 +219,6 @@ def _clean_model(cls_doc) -> None:
     """A pydantic model's fields as a reader wants them (see the module docstring); nested classes too."""
     import pdoc.doc
     from pydantic import BaseModel
-    from pydantic_core import PydanticUndefined
 
     obj = cls_doc.obj
     fields = obj.model_fields if isinstance(obj, type) and issubclass(obj, BaseModel) else {}
@@ -235,11 +234,13 @@ def _clean_model(cls_doc) -> None:
             continue
         info = fields[member.name]
         member.annotation = plain_type(info.annotation)
-        if member.default_value is PydanticUndefined:
+        extra = []
+        if info.is_required():
+            member.default_value = pdoc.doc.empty  # (pydantic's PydanticUndefined)
+            extra.append("required")
+        elif info.default_factory is not None:
             member.default_value = pdoc.doc.empty
-            extra = ["required"]
-        else:
-            extra = []
+            extra.append(f"default: {getattr(info.default_factory, '__name__', 'computed')}()")
         allowed = field_constraints(info)
         if allowed:
             extra.append(f"allowed: {allowed}")
