@@ -3,7 +3,7 @@
 
 The rotor's polar axis x3 precesses about the kinetic moment L; θ is the angle between them (nutation).
 Let e⊥ = (x3 − y3 cosθ)/sinθ, y3 = L/|L|, be the unit vector of x3 projected on the plane normal to L
-(../shared/docs/physics.md §5). Each control stator n (axis u_n in the case frame) turns its field at
+(docs/physics.md §5). Each control stator n (axis u_n in the case frame) turns its field at
 
     ν_n = ν · sign(u_n · e⊥)                                   # [K] (3.1)
 

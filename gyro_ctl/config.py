@@ -12,32 +12,47 @@ from .numbers import Finite, NonNegative, Positive, real
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
+    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
 
 
 class SpinupParams(_Strict):
     """Spin-up: ``stator`` driven at field rate = ``target_spin`` (rad/s) with ``current`` (A), optional ramp (A/s)."""
 
     law: Literal["spinup"] = "spinup"
+    """The law's name."""
     stator: str = "z3"
+    """Name of the stator that spins the rotor up."""
     target_spin: Finite
+    """Target spin, rad/s: the field turns at this rate (the zero-slip asymptote)."""
     current: NonNegative
+    """Current amplitude, A."""
     ramp: Optional[Positive] = None
+    """The current rises from 0 A at t = 0 at this rate to its value, A/s; None: the full current at once."""
 
 
 class PsiSwitchingParams(_Strict):
     """ψ-switching [K] (3.1): control stators flip their field direction with sign(u_n · e⊥)."""
 
     law: Literal["psi_switching"] = "psi_switching"
+    """The law's name."""
     control_stators: list[str] = ["z1", "z2"]
+    """Names of the control stators (axes normal to the spin axis)."""
     spin_stator: str = "z3"
+    """Name of the stator that keeps the rotor spinning."""
     # rad/s, one value or one per control stator; > 0 drives θ → 0, < 0 drives θ → π. Give the control
     # stators different |ν|: at equal rates their cross terms do not average out (resonance)
     nu: Union[Finite, list[Finite]]
+    """Control field rate ν, rad/s, one value or one per control stator: > 0 drives θ → 0, < 0 drives θ → π. Give the
+    control stators different |ν| (at equal rates their cross terms do not average out)."""
     control_current: NonNegative
+    """Current amplitude of the control stators, A."""
     spin_current: NonNegative
+    """Current amplitude of the spin stator, A."""
     spin_rate: Finite  # ν0, rad/s
+    """Field rate ν0 of the spin stator, rad/s."""
     dead_band: real(ge=0, lt=math.pi / 2) = 1e-3  # rad
+    """Nutation angle θ below which (or within this of π) the control fields are off, rad."""
 
     @model_validator(mode="after")
     def _distinct(self) -> "PsiSwitchingParams":
@@ -59,24 +74,32 @@ class OffParams(_Strict):
     """Off: every stator current is 0 A (rates unchanged)."""
 
     law: Literal["off"] = "off"
+    """The law's name."""
 
 
 class HoldParams(_Strict):
     """Hold: keep whatever the stators were last commanded (no command is sent)."""
 
     law: Literal["hold"] = "hold"
+    """The law's name."""
 
 
 class ManualCommand(_Strict):
+    """A fixed command of the manual law: current (A) and field rate (rad/s)."""
+
     current: NonNegative  # A
+    """Current amplitude, A."""
     rate: Finite  # rad/s
+    """Field rotation rate, rad/s (signed)."""
 
 
 class ManualParams(_Strict):
     """Manual: fixed commands per stator name, e.g. {z3: {current: 1.0, rate: 3000.0}}."""
 
     law: Literal["manual"] = "manual"
+    """The law's name."""
     commands: dict[str, ManualCommand]
+    """Fixed commands by stator name."""
 
 
 LAW_NAMES = ("spinup", "psi_switching", "off", "hold", "manual", "reorient")
@@ -92,12 +115,19 @@ class ControllerConfig(_Strict):
     """
 
     law: Literal["spinup", "psi_switching", "off", "hold", "manual", "reorient"]
+    """The control law: spinup, psi_switching, off, hold, manual or reorient."""
     period: Optional[Positive] = None  # s; default: the output period of the scene
+    """Period of the law, s; None: the scene's output period."""
     sampling: Literal["period", "events"] = "period"
+    """period: the law runs at each tick; events: its switching instants are also located exactly between ticks (in-
+    process runs)."""
     current_limit: Optional[NonNegative] = None  # A
+    """Largest current any command may have, A (commands are clipped); None: no clip."""
     rate_limit: Optional[NonNegative] = None  # rad/s
+    """Largest |field rate| any command may have, rad/s (clipped); None: no clip."""
     params: Union[SpinupParams, PsiSwitchingParams, OffParams, HoldParams, ManualParams, ReorientParams] = Field(
         discriminator="law")
+    """The law's parameters (the class of its law)."""
 
     @model_validator(mode="before")
     @classmethod

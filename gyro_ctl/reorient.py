@@ -63,15 +63,19 @@ _EPS_T = 1e-9  # s: time tolerance of the waypoint schedule (the control input i
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
+    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
 
 
 class Waypoint(_Strict):
     """One axis-parallel move: the component of L along stator ``axis`` goes to ``target`` in ``duration``."""
 
     axis: str  # stator name (z1 | z2 | z3 in the built-in scenes); the component is L·u_axis
+    """Name of the stator whose axis u carries the moved component L·u."""
     target: Finite  # N·m·s (kinetic moment component, case frame)
+    """Target of the component L·u, N·m·s (case frame)."""
     duration: Positive  # s
+    """Time of the move, s."""
 
 
 class ReorientParams(_Strict):
@@ -88,13 +92,21 @@ class ReorientParams(_Strict):
     """
 
     law: Literal["reorient"] = "reorient"
+    """The law's name."""
     waypoints: Annotated[list[Waypoint], Field(min_length=1)]
+    """The moves, done one after the other from start."""
     rates: dict[str, Positive]
+    """|ν_k| of the three stators by name, rad/s (distinct magnitudes; the law chooses the signs)."""
     coil_constants: dict[str, Positive]
+    """Coil constants b_k by stator name, T/A."""
     inertia: Annotated[list[Positive], Field(min_length=3, max_length=3)]
+    """Principal moments J1, J2, J3 of the rotor, kg·m²."""
     k_e: Positive
+    """Quasi-static torque coefficient of the rotor, N·m·s/T² ([K] (1.2))."""
     current_limit: Positive
+    """Largest current amplitude of any stator, A."""
     start: NonNegative = 0.0
+    """Time the first move starts, s."""
 
     @model_validator(mode="after")
     def _consistent(self) -> "ReorientParams":
@@ -140,6 +152,7 @@ class Segment:
     c: np.ndarray  # (3,) k_e B_k², N·m·s
     currents: np.ndarray  # (3,) A
     rates: np.ndarray  # (3,) signed ν_k, rad/s
+    """|ν_k| of the three stators by name, rad/s (distinct magnitudes; the law chooses the signs)."""
     lam: float  # λ_p (dimensionless)
     asymptote: Optional[float]  # J ν_p / λ_p (N·m·s) if λ_p > 0, else None
 

@@ -297,7 +297,7 @@ def test_bench_ros_part_measures_the_node_path(tmp_path):
 
 
 def test_accuracy_part_smoke(tmp_path):
-    """The accuracy part (gyro_sim/bench_accuracy.py) on two short scenes: every row has an achieved error and an
+    """The accuracy part (gyro_sim/apps/bench_accuracy.py) on two short scenes: every row has an achieved error and an
     estimate, the shipped scene meets its accuracy, the tables and accuracy.csv are written."""
     from gyro_sim.apps.bench_accuracy import accuracy_part
 

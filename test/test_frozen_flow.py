@@ -1,4 +1,4 @@
-"""The frozen-flow step (gyro_sim/frozen_flow.py) against the 8th-order Lawson stepper resolving every turn.
+"""The frozen-flow step (gyro_sim/compiled/frozen_flow.py) against the 8th-order Lawson stepper resolving every turn.
 
 Each test reports the difference it measured against a stated tolerance. References: lawson8 at many steps
 per turn (its own error on these horizons is below 1e-10, docs/numerics.md).
@@ -52,7 +52,7 @@ def test_default_scene_two_seconds_and_the_third_pass():
 
 def test_solid_sphere_ten_modes():
     """Solid sphere with 10 modes and the static tail (ν τ_1 = 1.25), 2 s: every mode solved in closed form."""
-    # (modes: 10 given: the scene now chooses its modes for its accuracy, gyro_sim/accuracy.py)
+    # (modes: 10 given: the scene now chooses its modes for its accuracy, gyro_sim/scenes/accuracy.py)
     ref = advanced("spinup_solid_sphere", 2.0, {"method": "lawson8", "steps_per_turn": 384}, modes=10)
     ff = advanced("spinup_solid_sphere", 2.0, {"method": "frozen_flow", "rate_change": 1e-4}, modes=10)
     eL, eq = final_error(ff, ref)

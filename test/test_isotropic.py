@@ -2,7 +2,7 @@
 (gyro_sim.engine.simulate.integrates_attitude).
 
 Without attitude L and the eddy modes are integrated in the case frame, τ(ė − Ω×e) + e = −τ(dB/dt − Ω×B)
-(gyro_sim/kernels.py); these tests hold it to the body-frame model with the attitude.
+(gyro_sim/compiled/kernels.py); these tests hold it to the body-frame model with the attitude.
 """
 import math
 import time
@@ -24,7 +24,7 @@ J = 5.592e-6  # kg·m², the default shell's transverse moment, all three equal 
 def iso_scene(attitude: bool, duration: float = 2.0, **over):
     """The default thin-shell spin-up (2 s, no controller) with inertia [J, J, J]. The step knobs are given (the old
     defaults): a run plans its steps for its accuracy, and without the attitude it has no attitude tolerance to
-    meet, so the two runs compared here would otherwise take other steps (gyro_sim/accuracy.py)."""
+    meet, so the two runs compared here would otherwise take other steps (gyro_sim/scenes/accuracy.py)."""
     ov = {"controller": None, "rotor.inertia": [J, J, J], "duration": duration, "output.attitude": attitude,
           "integrator": {"steps_per_turn": 12, "rate_change": 1e-4}, **over}
     return load_scene("spinup_thin_shell", overrides=ov)

@@ -32,7 +32,7 @@ def _mcap(bag: Path) -> Path:
 
 def long_scene(tmp_path: Path) -> str:
     """spinup_thin_shell with a loose accuracy (rtol 1e-3, no attitude tolerance) as a file: a run of 10⁵ s at the
-    default accuracy (1e-6 rad of attitude over the run) would take hours (gyro_sim/accuracy.py warns), and these
+    default accuracy (1e-6 rad of attitude over the run) would take hours (gyro_sim/scenes/accuracy.py warns), and these
     tests want a long run that streams its bag at the old pace, to be stopped mid-run."""
     import yaml
 

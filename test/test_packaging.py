@@ -371,7 +371,7 @@ MODULE_KEYS = {
     "foxglove": None,  # foxglove-sdk (the extra 'live')
     "websockets": "python3-websockets",  # the live view's relay (the extra 'live': gyro_sim/io/live_relay.py)
     "gyro_sim": "gyro_sim", "launch": "launch", "launch_ros": "launch_ros",
-    "pdoc": None,  # the 'docs' extra (gyro_sim/api_docs.py)
+    "pdoc": None,  # the 'docs' extra (gyro_sim/apps/api_docs.py)
 }
 #: pip requirement of setup.py → rosdep key (ros-* wheels: the ROS package of that name)
 PIP_KEYS = {

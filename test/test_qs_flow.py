@@ -1,5 +1,5 @@
-"""The quasi-static flow step (gyro_sim/qs_flow.py, issue 23): its closed forms, its order, its agreement with the
-turn-resolving steppers, the ``auto`` choice and the honesty of the run's error estimate with it.
+"""The quasi-static flow step (gyro_sim/compiled/qs_flow.py, issue 23): its closed forms, its order, its agreement with
+the turn-resolving steppers, the ``auto`` choice and the honesty of the run's error estimate with it.
 
 No timing is asserted (the machine is shared): speed is the benchmark's (docs/benchmark.md)."""
 import math

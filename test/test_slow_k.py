@@ -1,4 +1,4 @@
-"""[K]'s averaged model as a fidelity level (gyro_sim/slow_k.py) against the full model.
+"""[K]'s averaged model as a fidelity level (gyro_sim/averaging/slow_k.py) against the full model.
 
 Three stators at constant rates ([K] (2.1)) and the ψ-switching law ([K] (3.1), (3.3)): ``fidelity: auto``
 runs the averaged model where its region holds and the full model elsewhere (near θ = 0 under ψ-switching);

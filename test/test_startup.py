@@ -1,6 +1,6 @@
 """Start-up of a process (issue 23): what ``import gyro_sim``, ``from gyro_sim.engine.simulate import run`` and a first
 run import and load. Each check runs in a new interpreter (``sys.modules`` of this one holds whatever other tests
-imported); none bounds a time (the benchmark's start-up part measures those: gyro_sim/bench_scaling.py)."""
+imported); none bounds a time (the benchmark's start-up part measures those: gyro_sim/apps/bench_scaling.py)."""
 import json
 import subprocess
 import sys

@@ -1,4 +1,4 @@
-"""Parameter sweeps (gyro_sim/sweep.py, ``gyro-sim sweep``): spec parsing, variants, metrics, failed
+"""Parameter sweeps (gyro_sim/apps/sweep.py, ``gyro-sim sweep``): spec parsing, variants, metrics, failed
 and invalid runs, resume, the Parquet table, plots, the CLI, and execution on Dask — a local cluster
 and a real scheduler with workers started here as separate processes on 127.0.0.1 (same numbers as
 in-process). Runs are tiny (20 ms of nutation_oblate); ``-s`` prints the measured figures."""

@@ -1,5 +1,5 @@
 """Control ticks in compiled code (issue 23): the built-in laws written once in compiled form give the commands of
-the Python laws they replaced, and in-process runs through the compiled tick loop (gyro_sim/ticks.py) give the
+the Python laws they replaced, and in-process runs through the compiled tick loop (gyro_sim/engine/ticks.py) give the
 break-by-break Python loop's numbers bit for bit (every array, the commands, the steps, the error estimate), with
 the Python loop entered a few times per run instead of at every tick. A law put in ``LAWS`` in Python still runs,
 at every tick."""

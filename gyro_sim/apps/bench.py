@@ -72,7 +72,7 @@ def work_precision(res: Results, scene: str, horizon: float, with_baselines: boo
                    spt_ref: Optional[int] = None, extra: Optional[dict] = None) -> None:
     """Every method on one scene (with ``extra`` overrides: a variant, named by :func:`variant_label`) and horizon
     against one converged reference; fills res.rows. The baselines: solve_ivp (``cfg.baselines``) and, with
-    ``cfg.compiled_baseline``, the compiled fixed-step RK4 (gyro_sim/bench_baseline.py)."""
+    ``cfg.compiled_baseline``, the compiled fixed-step RK4 (gyro_sim/apps/bench_baseline.py)."""
     cfg = res.config
     spt_ref = spt_ref or cfg.spt_ref
     label = variant_label(scene, extra)
@@ -501,7 +501,7 @@ def _profile_loops():
 
 
 def scaling_parts(res: Results, only: Optional[str] = None) -> None:
-    """The startup and sweep parts (gyro_sim/bench_scaling.py) where the config has them (``only``: that one)."""
+    """The startup and sweep parts (gyro_sim/apps/bench_scaling.py) where the config has them (``only``: that one)."""
     from gyro_sim.apps.bench_scaling import startup_part, sweep_part
 
     cfg, quick = res.config, res.config.mode == "quick"

@@ -35,7 +35,8 @@ def refined(method: str, value: float) -> float:
     """The knob's value that halves the step."""
     return value / 2 if knob_of(method) == "rate_change" else 2 * value
 BASELINES = ("DOP853", "LSODA")
-#: the compiled baseline's method label (classic RK4, fixed step, numba right-hand side: gyro_sim/bench_baseline.py)
+#: the compiled baseline's method label (classic RK4, fixed step, numba right-hand side:
+#: gyro_sim/apps/bench_baseline.py)
 RK4_METHOD = "numba RK4"
 
 
@@ -296,7 +297,8 @@ def run_ours(scene_name: str, horizon: float, value: Optional[float] = None, lev
     # per step + 1 per output sample; an averaged stretch adds its own (solve_ivp) count
     rhs = STAGES[method] * steps + int(res.t.size) + int(getattr(res, "averaged_rhs_evaluations", 0) or 0)
     segments = getattr(res, "averaged_segments", None) or []
-    if value is None:  # the knob the run's plan starts with (gyro_sim/accuracy.py; its error control may change it)
+    # (the knob the run's plan starts with: gyro_sim/scenes/accuracy.py; its error control may change it)
+    if value is None:
         plan = Simulator(scene, horizon=horizon, quiet=True).step_plan
         value = plan.rate_change if knob == "rate_change" else plan.steps_per_turn[method]
     return Row(scene_name, horizon, _method_label(level), knob, float(value), wall, steps, int(rhs),

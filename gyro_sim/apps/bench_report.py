@@ -199,7 +199,7 @@ def markdown(res: Results) -> str:
                 + (", cheapest run" if t['baselines'][m]['flat'] else "") + ")" if m in t["baselines"] else "–"
                 for m in names) for t in sp],
             [f"{RK4_METHOD}: classic RK4 with a fixed step on a numba right-hand side of the same model "
-             "(gyro_sim/bench_baseline.py), swept over the number of steps; solve_ivp: SciPy over the NumPy "
+             "(gyro_sim/apps/bench_baseline.py), swept over the number of steps; solve_ivp: SciPy over the NumPy "
              "right-hand side. Costs interpolated log-log on each method's Pareto front."])[:-1]
     L += ["", "## References", "",
           "| scene | horizon s | reference | CPU s | cross-check | CPU s | agreement |", "|---|---|---|---|---|---|---|"]
@@ -266,7 +266,7 @@ def markdown(res: Results) -> str:
                      f"| {v['error_theta']:.1e}" for v in res.averaged],
                     ["Errors are final-state differences of auto from full; each contains the full model's fast ripple "
                      "(O(ε)), which the averaged model does not carry. The regions are in docs/averaged_k.md §7, "
-                     "docs/averaged_m.md and gyro_sim/fidelity.py."])
+                     "docs/averaged_m.md and gyro_sim/engine/fidelity.py."])
     if res.savings:
         L += _table("## What skipping is worth (spinup_thin_shell, no controller; CPU s)", "the scene skips | compared "
                     "| horizon s | CPU s (skipped) | stepper, steps | CPU s (done) | stepper, steps | ratio",

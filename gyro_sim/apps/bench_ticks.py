@@ -10,7 +10,7 @@ CPU time (``time.process_time``, least of the repeats after a warm-up run) of
   averaged model down to θ = 2.6°, then the full model with ψ-switching at 1.6 kHz) and, in full mode, as shipped
   (rtol 1e-6: no stretch averaged, 12 700 ticks);
 
-each with the compiled tick loop (gyro_sim/ticks.py) and with the break-by-break Python loop
+each with the compiled tick loop (gyro_sim/engine/ticks.py) and with the break-by-break Python loop
 (:func:`gyro_sim.ticks.python_ticks`) in the same process. Quick mode runs the default scene over 12 s (600 ticks)
 and leaves out the as-shipped ``nutation_slow``.
 

@@ -139,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with --live: after the run, keep serving until the clients unsubscribe, at most S wall "
                           "seconds (default 2), so they get the last samples")
     run.add_argument("--fidelity", choices=("full", "averaged", "auto"), default=None,
-                     help="model fidelity instead of the scene's (in-process only; gyro_sim/fidelity.py)")
+                     help="model fidelity instead of the scene's (in-process only; gyro_sim/engine/fidelity.py)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
     run.add_argument("--force", action="store_true",
                      help="run a scene whose plan exceeds the step budget (1e9 steps, gyro_sim/engine/budget.py); "
@@ -186,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "and footer), into a complete bag: every whole message is kept, the cut tail is dropped, "
                     "custom_data says gyro_sim.end = interrupted: recovered (...). The damaged original stays "
                     "as BAG/<name>.mcap.damaged (and an old metadata.yaml as metadata.yaml.damaged); a complete "
-                    "bag is refused. Details: gyro_sim/bag_repair.py.")
+                    "bag is refused. Details: gyro_sim/io/bag_repair.py.")
     recover.add_argument("bag", metavar="BAG", type=Path, help="the bag directory")
     recover.set_defaults(func=_cmd_bag_recover)
 

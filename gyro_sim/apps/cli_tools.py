@@ -148,7 +148,7 @@ def _cmd_api_docs(args) -> int:
     from gyro_sim.apps.api_docs import build
 
     try:
-        docs = build(args.out)
+        docs = build(args.out, progress=lambda line: _write(sys.stderr, f"api-docs: {line}\n"))
     except OSError as exc:
         return _error(f"cannot write the API reference to {args.out}: {exc.strerror or exc}")
     for message in docs.warnings:

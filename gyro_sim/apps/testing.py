@@ -286,7 +286,7 @@ def _start_figures(line: str) -> dict:
 
 def result_from_bag(bag, scene=None, duration: Optional[float] = None, control_period: Optional[float] = None):
     """A :class:`gyro_sim.simulate.RunResult` of a bag the simulator node recorded (a path, or its
-    :class:`~gyro_sim.recording.BagData`): :func:`gyro_sim.read_bag` (gyro_sim/results.py), imported on first use
+    :class:`~gyro_sim.recording.BagData`): :func:`gyro_sim.read_bag` (gyro_sim/io/results.py), imported on first use
     (this plugin loads in every pytest session)."""
     from gyro_sim.io.results import read_bag
 

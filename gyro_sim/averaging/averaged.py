@@ -1,4 +1,4 @@
-"""Averaged (slow) models of [K] (Komarov, seed 002) for the quasi-static eddy torque, in SI.
+"""Averaged (slow) models of [K] (Komarov; docs/physics.md, Bibliography) for the quasi-static eddy torque, in SI.
 
 Every public function takes and returns SI quantities (m, kg, s, T, rad, rad/s, N·m·s):
 ``L`` is the kinetic moment in the case frame (N·m·s), θ, φ the Euler angles of the body in

@@ -1,4 +1,4 @@
-"""Averaged (slow) equations of [M] §3 (Martynenko, seed 000) for any penetration depth, in SI.
+"""Averaged (slow) equations of [M] §3 (Martynenko; docs/physics.md, Bibliography) for any penetration depth, in SI.
 
 An axisymmetric rotor (J1 = J2, polar axis x3) with a homogeneous spherical conductor of any
 thickness in one of the three uniform fields of [M]:

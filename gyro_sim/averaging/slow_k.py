@@ -42,7 +42,7 @@ import numpy as np
 from gyro_sim.averaging.averaged import k21_torque, k_e_of_scene
 from gyro_sim.physics.frames import nutation_angle
 
-MU_MAX = 1e-3  # the averaging parameter's bound of every averaged model in the hybrid (gyro_sim/fidelity.py)
+MU_MAX = 1e-3  # the averaging parameter's bound of every averaged model in the hybrid (gyro_sim/engine/fidelity.py)
 PSI_STEP_MAX = 0.05
 ENTER_MARGIN = 0.8  # a run enters the region where every ratio is ≤ 0.8 and leaves it where one reaches 1
 SWITCHED_RATIO_MIN = 10.0  # |ν_n| and ||ν_j| − |ν_k|| in units of Λ, switched stators
@@ -184,7 +184,7 @@ class SlowK:
         if not bad:
             return True, ", ".join(f"{k} {v:.2g}" for k, v in r.items()) + " of their limits"
         return False, "; ".join(f"{k}: {v:.3g} × its limit" for k, v in bad.items()) + \
-            f" ([K]'s region, gyro_sim/slow_k.py: ε ≤ {MU_MAX:g}, ψ-step ≤ {PSI_STEP_MAX:g})"
+            f" ([K]'s region, gyro_sim/averaging/slow_k.py: ε ≤ {MU_MAX:g}, ψ-step ≤ {PSI_STEP_MAX:g})"
 
     def exit_event(self):
         """solve_ivp event (terminal, falling): 1 − the largest ratio, ≥ 0 inside the region."""

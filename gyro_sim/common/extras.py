@@ -10,7 +10,7 @@ extra to install::
     # MissingExtra: gyro-sim run --live needs the 'live' extra: pip install 'gyro_sim[live]' (missing: foxglove)
 
 The check finds modules without importing them (``importlib.util.find_spec``: fast, no side effects), so it
-can run before anything else. ``gyro-sim`` (gyro_sim/cli.py) turns a :class:`MissingExtra` into
+can run before anything else. ``gyro-sim`` (gyro_sim/apps/cli.py) turns a :class:`MissingExtra` into
 ``error: <message>`` on stderr and exit status 2; library code lets it propagate (it is an ``ImportError``).
 """
 from __future__ import annotations

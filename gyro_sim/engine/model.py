@@ -15,8 +15,8 @@ from gyro_sim.scenes.scene import Scene, merge_times
 
 
 #: the fixed step knobs of the runs before the accuracy plan (issue 19): steps per turn of the fastest rotation and
-#: the frozen-flow rate_change. Runs now choose their knobs from the scene's ``accuracy`` (gyro_sim/accuracy.py,
-#: ``Simulator.step_plan``); these stay as the benchmark's "today's defaults" (gyro_sim/bench.py)
+#: the frozen-flow rate_change. Runs now choose their knobs from the scene's ``accuracy`` (gyro_sim/scenes/accuracy.py,
+#: ``Simulator.step_plan``); these stay as the benchmark's "today's defaults" (gyro_sim/apps/bench.py)
 DEFAULT_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
 DEFAULT_RATE_CHANGE = 1e-4
 #: a frozen-flow step costs about this many lawson8 steps per (1 + number of eddy modes): 8 µs against

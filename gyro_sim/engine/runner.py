@@ -36,7 +36,7 @@ class Runner:
     simulator node, so both produce the same numbers. ``attitude``: see :func:`integrates_attitude` (the
     ROS node passes True: it publishes /gyro/imu and /gyro/euler).
 
-    Accuracy (gyro_sim/accuracy.py): the simulator's modes and step knobs are planned for the scene's
+    Accuracy (gyro_sim/scenes/accuracy.py): the simulator's modes and step knobs are planned for the scene's
     ``accuracy`` over ``horizon`` s (default: the duration). With ``estimate`` (default) a shadow simulator runs
     alongside (same commands, same stops, longer steps) and the error control (:class:`gyro_sim.accuracy.
     ErrorControl`) compares the two at its check instants, which are breaks of every run (so the ROS node and
@@ -70,7 +70,7 @@ class Runner:
             check_budget(self.sim, T, self.period)
         if not is_legacy():
             self.sim._warn_plan(self.sim._rates[0])
-        # the error control and its shadow run (gyro_sim/accuracy.py); checks at fixed fractions of the horizon
+        # the error control and its shadow run (gyro_sim/scenes/accuracy.py); checks at fixed fractions of the horizon
         plan = self.sim.step_plan
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
             estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()

@@ -67,7 +67,7 @@ def drive(r: Runner, on_samples=None, release: bool = False) -> None:
     (:meth:`Runner.samples`). ``release``: after each call the rows (and logged commands) are released, so
     memory stays flat (a streamed run: the caller took them). ``r.wall_time`` / ``r.compile_time`` are set even
     when the run is interrupted (KeyboardInterrupt), up to the interruption. Ticks and samples between the other
-    breaks go through the compiled tick loop where it applies (gyro_sim/ticks.py: the same numbers)."""
+    breaks go through the compiled tick loop where it applies (gyro_sim/engine/ticks.py: the same numbers)."""
     from gyro_ctl.laws import make_law, make_switching
 
     from gyro_sim.engine import ticks

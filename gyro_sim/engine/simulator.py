@@ -52,7 +52,7 @@ class Simulator:
         J = scene.inertia
         self.J = J
         self.Jinv = 1.0 / J
-        # the run's accuracy plan (gyro_sim/accuracy.py): made for ``horizon`` s (default: the scene's duration),
+        # the run's accuracy plan (gyro_sim/scenes/accuracy.py): made for ``horizon`` s (default: the scene's duration),
         # the same in-process and in the ROS node
         self.horizon = float(scene.duration if horizon is None else horizon)
         om_reach = spin_reach(scene, self.horizon)  # the fastest spin the run can reach (rad/s)
@@ -147,8 +147,9 @@ class Simulator:
             self._free_axis = -3  # isotropic, modes in the case frame (kernels.free_step)
         self._inv_ref = 1.0 / ref
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
-        # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/accuracy.py): turns of the fastest
-        # rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body motion
+        # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/scenes/accuracy.py): turns of the
+        # fastest rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body
+        # motion
         Lmag0 = float(np.linalg.norm(self.y[0:3]))
         om_plan = max(om_reach, field_rates(scene), self._effect_rate())
         L_bound = Lmag0 if om_reach <= Lmag0 * float(np.max(self.Jinv)) * (1 + 1e-12) else float(np.max(J)) * om_reach
@@ -316,7 +317,7 @@ class Simulator:
                 if held:
                     h_def = min(h_def, self.tau_min)
                 if h_ff >= FROZEN_FLOW_COST * (1 + self.tau.size) * h_def:
-                    # the quasi-static model: the quasi-static flow step instead (gyro_sim/qs_flow.py)
+                    # the quasi-static model: the quasi-static flow step instead (gyro_sim/compiled/qs_flow.py)
                     m = "qs_flow" if self._qs_applies() else "frozen_flow"
                     self._check_knob(m)
                     return m, self._frozen_flow_step(self.step_plan.knob(m))
@@ -326,12 +327,12 @@ class Simulator:
         return m, self._max_step(False, m)
 
     def _qs_applies(self) -> bool:
-        """Whether ``auto`` takes the quasi-static flow step (gyro_sim/qs_flow.py) where it would take frozen_flow:
-        on the quasi-static torque model (not in the old defaults' runs, gyro_sim.accuracy.legacy). Its step is as
-        long (the same error model), costs a third (0.8 µs against 2.3 µs, one phasor), and its error measured no
-        larger on every quasi-static scene (docs/numerics.md). Where frozen_flow does not pay, lawson8 stays: its
-        error is the predictable one (it resolves the field's ripple): on reorient_L qs_flow takes 403 699 steps
-        (2.6 s CPU) against lawson8's 10 319 (0.18 s), docs/accuracy.md."""
+        """Whether ``auto`` takes the quasi-static flow step (gyro_sim/compiled/qs_flow.py) where it would take
+        frozen_flow: on the quasi-static torque model (not in the old defaults' runs, gyro_sim.accuracy.legacy). Its
+        step is as long (the same error model), costs a third (0.8 µs against 2.3 µs, one phasor), and its error
+        measured no larger on every quasi-static scene (docs/numerics.md). Where frozen_flow does not pay, lawson8
+        stays: its error is the predictable one (it resolves the field's ripple): on reorient_L qs_flow takes 403 699
+        steps (2.6 s CPU) against lawson8's 10 319 (0.18 s), docs/accuracy.md."""
         return not is_legacy() and qs_flow.applies(self.scene, self.J, self.eff[effects.ON] != 0.0)
 
     def planned_steps(self, plan=None) -> float:

@@ -10,8 +10,8 @@ Everything here is SI (m, kg, s, T, rad, rad/s, kg·m²/s, N·m) and uses the fr
 * kinetic-moment frame ``Y = [y1 y2 y3]``, ``y3 = L/|L|``; Euler angles (z-x-z) of the
   body in Y: ``R = Y Rz(ψ) Rx(θ) Rz(φ)``, so ``L_b = |L| (sinθ sinφ, sinθ cosφ, cosθ)``.
 
-Paper references: [M] Martynenko (seed 000), [K] Komarov (seed 002),
-[BS] Bogatyrev & Strygin (seed 001), [LL] Landau & Lifshitz, Mechanics §37.
+Paper references (docs/physics.md, Bibliography): [M] Martynenko, [K] Komarov, [BS] Bogatyrev & Strygin;
+[LL] Landau & Lifshitz, Mechanics §37.
 See ``docs/closed_forms.md`` for the findings on [M] (3.18)–(3.20).
 """
 from __future__ import annotations

@@ -12,11 +12,11 @@ with the dimensionless transfer function ``g = 2 alpha / r2^3`` (alpha: Gaussian
 polarizability of [M], m^3).  ``g(0) = 0`` and ``g -> -1`` for omega -> infinity
 (perfect flux exclusion).
 
-Closed forms (source [M] = Gyroscope paper, seed 000_abe97e8d2c512016):
+Closed forms (source [M] = Martynenko; docs/physics.md, Bibliography):
 
 * thin shell, [M] (2.15):      g = i w tau / (1 - i w tau),  tau = mu0 sigma r2 h / 3
 * solid sphere, [M] (2.14):    g = -[1 - 3/x^2 + (3/x) cot x],  x^2 = i w mu0 sigma a^2
-* thick shell, [M] (2.13) as corrected in physics.md (the printed grouping of the
+* thick shell, [M] (2.13) as corrected in docs/physics.md §7 (the printed grouping of the
   denominator is dimensionally inconsistent).
 
 The modal form used by the simulator (``ModalModel``) is the partial-fraction

@@ -1,7 +1,7 @@
 """Averaged and closed-form models of [KLT] (Kushpil, Leshchenko, Timoshenko, 2000), in SI.
 
-Two problems of [KLT] (the second article of ``seeds/004_bb47a4a4701811a3.txt``), each the check of
-an effect of the full model (:mod:`gyro_sim.effects`, scene section ``effects``):
+Two problems of [KLT] (docs/physics.md, Bibliography), each the check of
+an effect of the full model (:mod:`gyro_sim.compiled.effects`, scene section ``effects``):
 
 §1 **Near-spherical body with a viscoelastic element** (``effects.damper``): a point mass m on an
 isotropic spring (stiffness c, N/m) with viscous friction (δ, N·s/m) attached at O1 = ρ e3 of a

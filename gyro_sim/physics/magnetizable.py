@@ -1,7 +1,7 @@
 """Magnetizable, anisotropic conducting body of [BS] in SI: closed forms and the Theorem-2 criterion.
 
-[BS] = Bogatyrev & Strygin (seed 001), Gaussian units. The full model (:mod:`gyro_sim.kernels`,
-scene section ``effects.magnetizable``) uses the induced moment, body frame,
+[BS] = Bogatyrev & Strygin (docs/physics.md, Bibliography), Gaussian units. The full model
+(:mod:`gyro_sim.compiled.kernels`, scene section ``effects.magnetizable``) uses the induced moment, body frame,
 
     m_b = (1/μ0) [M B_b + P1 dB_b/dt + P2 d²B_b/dt²]        (A·m²)          [BS] (2.3), (6.1)
 

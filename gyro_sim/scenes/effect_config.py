@@ -39,12 +39,15 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from gyro_ctl.numbers import Finite, real
 
+__all__ = ["Effects", "Unbalance", "GasDrag", "Magnetizable", "Profile", "Flywheel", "Damper", "unit_vector"]
+
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
+    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
 
 
 def unit_vector(a: list[float], key: str) -> list[float]:
@@ -74,9 +77,14 @@ class Unbalance(_Strict):
     """Lagrange-top restoring moment [KLT] (13): N = k(Θ) (v × x3), Θ = angle(v, x3)."""
 
     k: Finite  # N·m (m g d for a centre of mass d above the pivot)
+    """Restoring-moment coefficient, N·m (m g d for a centre of mass at distance d from the pivot along x3): k(Θ) = k +
+    k1 cosΘ + k2 cos²Θ."""
     k1: Finite = 0.0
+    """Coefficient of cosΘ in k(Θ), N·m."""
     k2: Finite = 0.0
+    """Coefficient of cos²Θ in k(Θ), N·m."""
     vertical: Vec3 = [0.0, 0.0, 1.0]
+    """The direction Θ is measured from (up, against gravity), case frame (dimensionless; normalised)."""
 
     @field_validator("vertical")
     @classmethod
@@ -88,15 +96,20 @@ class GasDrag(_Strict):
     """[KLT] (17): N_b = −(I1 Ω_b1, I1 Ω_b2, I3 Ω_b3); I(t) polynomials in t (s)."""
 
     transverse: Annotated[list[Finite], Field(min_length=1, max_length=3)]  # N·m·s / s^k
+    """Coefficients c_k of I1(t) = Σ c_k t^k (t in s), N·m·s / s^k: drag on the transverse body rates."""
     axial: Annotated[list[Finite], Field(min_length=1, max_length=3)]
+    """Coefficients of I3(t), same form, N·m·s / s^k: drag on the axial body rate."""
 
 
 class Magnetizable(_Strict):
     """[BS] (2.3), (6.1): induced moment m = (1/μ0)[M B_b + P1 Ḃ_b + P2 B̈_b] (body matrices)."""
 
     M: Mat3 = [[0.0] * 3, [0.0] * 3, [0.0] * 3]  # m³
+    """Static magnetisation matrix (body frame, symmetric), m³; zero for a non-magnetic body."""
     P1: Optional[Mat3] = None  # m³·s
+    """First-order (lag) matrix, body frame, symmetric, m³·s; None: the conductor's −2π r2³ τ_eff (isotropic)."""
     P2: Optional[Mat3] = None  # m³·s²
+    """Second-order matrix, body frame, symmetric, m³·s²; None: the conductor's 2π r2³ Σ w_n τ_n²."""
 
     @field_validator("M", "P1", "P2")
     @classmethod
@@ -105,8 +118,12 @@ class Magnetizable(_Strict):
 
 
 class Profile(_Strict):
+    """A speed table of the flywheel: Ω_f (rad/s, relative to the body) at the given times (s), piecewise linear."""
+
     time: Annotated[list[Finite], Field(min_length=1, max_length=64)]  # s, increasing
+    """Times of the table, s (strictly increasing)."""
     speed: Annotated[list[Finite], Field(min_length=1, max_length=64)]  # rad/s
+    """Flywheel speed Ω_f relative to the body at those times, rad/s (piecewise linear; held outside the table)."""
 
     @model_validator(mode="after")
     def _table(self) -> "Profile":
@@ -122,8 +139,11 @@ class Flywheel(_Strict):
     """[S]: internal flywheel of axial inertia J_f on the body axis a, speed Ω_f(t) relative to the body."""
 
     inertia: real(gt=0)  # kg·m²
+    """Axial moment of inertia J_f of the wheel, kg·m²."""
     axis: Vec3
+    """The wheel's axis a in the body frame (dimensionless; normalised)."""
     profile: Profile = Profile(time=[0.0], speed=[0.0])
+    """Speed table Ω_f(t) of the wheel relative to the body (s, rad/s)."""
 
     @field_validator("axis")
     @classmethod
@@ -135,19 +155,32 @@ class Damper(_Strict):
     """[KLT] §1: point mass m at O1 = ρ x3 on an isotropic spring c with viscous friction δ."""
 
     mass: real(gt=0)  # kg
+    """The moving point mass m, kg."""
     radius: real(ge=0)  # m
+    """Distance ρ of its attachment point O1 = ρ x3 from the centre of mass, m."""
     stiffness: real(gt=0)  # N/m
+    """Spring stiffness c (isotropic), N/m."""
     damping: real(ge=0) = 0.0  # N·s/m
+    """Viscous friction δ, N·s/m."""
     offset: Vec3 = [0.0, 0.0, 0.0]  # initial displacement of the mass from O1, body frame, m
+    """Initial displacement of the mass from O1, body frame, m."""
     velocity: Vec3 = [0.0, 0.0, 0.0]  # initial velocity relative to the body, m/s
+    """Initial velocity of the mass relative to the body, body frame, m/s."""
 
 
 class Effects(_Strict):
+    """The scene's ``effects`` section: each effect is off unless its key is present."""
+
     unbalance: Optional[Unbalance] = None
+    """Restoring moment of the Lagrange top ([KLT] (13)); None: off."""
     gas_drag: Optional[GasDrag] = None
+    """Gas drag with slowly varying coefficients ([KLT] (17)); None: off."""
     magnetizable: Optional[Magnetizable] = None
+    """Magnetizable or non-spherical body ([BS] (2.3), (6.1)); replaces the eddy-mode model; None: off."""
     flywheel: Optional[Flywheel] = None
+    """Internal flywheel ([S]); None: off."""
     damper: Optional[Damper] = None
+    """Viscoelastic element: a point mass on a spring ([KLT] §1); None: off."""
 
     @property
     def any(self) -> bool:

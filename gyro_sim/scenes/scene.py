@@ -71,9 +71,9 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       method: auto                   # lawson8 | etdrk4 | frozen_flow | qs_flow | auto: qs_flow or frozen_flow
                                      # where it applies and pays, else lawson8 unless an eddy mode is stiff
                                      # (h > 2τ_n), then etdrk4; frozen_flow: steps longer than a field turn
-                                     # (axisymmetric rotor, no effects; gyro_sim/frozen_flow.py,
+                                     # (axisymmetric rotor, no effects; gyro_sim/compiled/frozen_flow.py,
                                      # docs/numerics.md); qs_flow: the same for the quasi-static torque, third
-                                     # order (gyro_sim/qs_flow.py)
+                                     # order (gyro_sim/compiled/qs_flow.py)
       steps_per_turn: null           # lawson8/etdrk4: steps per period of the fastest rotation (spin or
                                      # field); free stepper: per turn of the body-frame motion; default:
                                      # chosen from accuracy and the run's turns (a number here wins, with a
@@ -86,9 +86,9 @@ Format (all keys but ``rotor``, ``duration`` optional)::
       period: 0.001                  # s (default: the output period)
       params: {nu: 300.0, control_current: 1.0, spin_current: 1.0, spin_rate: 3000.0}
 
-    fidelity: full                   # full | averaged | auto (gyro_sim/fidelity.py)
+    fidelity: full                   # full | averaged | auto (gyro_sim/engine/fidelity.py)
     effects: {}                      # unbalance, gas_drag, magnetizable, flywheel, damper
-                                     # (gyro_sim/effect_config.py; all off by default)
+                                     # (gyro_sim/scenes/effect_config.py; all off by default)
 
 Physical limits (gyro_sim/scenes/limits.py): every field amplitude b_k I_k and field term at most 100 T, every
 rate and the initial body rate at most 1e7 rad/s, J_max/J_min at most ``max_inertia_ratio``; commands (in-process,
@@ -121,6 +121,8 @@ from gyro_sim.scenes.scene_text import SceneError, clip, human_bytes, parse_scen
 
 __all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir",
            "parse_scene_text", "result_size", "check_command_times", "max_result_bytes", "MAX_RESULT_BYTES"]
+__all__ += ["Rotor", "Conductor", "Stator", "FieldTerm", "Command", "Initial", "Output", "OutputWindow",  # sections
+            "Integrator", "Accuracy"]
 
 MAX_WINDOW_SAMPLES = 1e7  # output samples one window may ask for (memory: ~1 kB each with 50 modes)
 MAX_WINDOWS = 100  # output windows of a scene (each one is merged into the sample times on its own)
@@ -132,16 +134,21 @@ Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
+    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
 
 
 class Conductor(_Strict):
     """Homogeneous non-magnetic spherical conductor of the rotor."""
 
     kind: Literal["thin_shell", "solid_sphere", "shell"]
+    """Shape of the conductor: thin_shell (thickness ≪ r2 and ≪ skin depth), solid_sphere, or shell (any thickness)."""
     outer_radius: real(ge=1e-6, le=10.0)  # m
+    """Outer radius r2 of the conductor, m."""
     conductivity: real(ge=1e-3, le=1e12)  # S/m (metals: 1e6–1e8)
+    """Electrical conductivity σ, S/m (metals: 1e6–1e8)."""
     thickness: Optional[real(ge=1e-9)] = None  # m
+    """Wall thickness h = r2 − r1, m; required for thin_shell and shell (0 < h < r2), absent for solid_sphere."""
 
     @model_validator(mode="after")
     def _thickness(self) -> "Conductor":
@@ -164,10 +171,15 @@ class Conductor(_Strict):
 
 
 class Rotor(_Strict):
+    """The rotor (scene key ``rotor``): principal moments of inertia and the conductor."""
+
     inertia: Annotated[list[real(ge=1e-15, le=1e6)],
                        Field(min_length=3, max_length=3)]  # kg·m²
+    """Principal moments of inertia [J1, J2, J3], kg·m²; x3 is the polar (symmetry) axis."""
     conductor: Optional[Conductor] = None
+    """The rotor's conducting sphere or shell (eddy currents); None: a non-conducting rotor (no field torque)."""
     max_inertia_ratio: Optional[Positive] = None  # largest J_max/J_min (default: limits.MAX_INERTIA_RATIO)
+    """Largest J_max/J_min accepted (dimensionless); None: the default limit 1e4."""
 
     @field_validator("inertia")
     @classmethod
@@ -183,14 +195,26 @@ class Rotor(_Strict):
 
 
 class Stator(_Strict):
+    """A stator (an entry of ``stators``): a uniform field of amplitude b_k I_k rotating at ν_k about its axis u_k,
+    B_k = b_k I_k (e1k cos σ_k + e2k sin σ_k), dσ_k/dt = ν_k."""
+
     name: Annotated[str, Field(min_length=1)]
+    """The stator's name (unique in the scene; commands and control laws use it)."""
     axis: Vec3
+    """Axis u_k of the stator in the case frame (dimensionless; normalised on load): the field rotates in the plane
+    normal to it."""
     coil_constant: Positive
+    """Coil constant b_k, T/A: the field amplitude is b_k·I_k."""
     current: NonNegative = 0.0
+    """Current amplitude I_k at t = 0, A."""
     rate: Finite = 0.0
+    """Field rotation rate ν_k = dσ_k/dt at t = 0, rad/s; the sign is the direction of rotation about the axis."""
     phase: Finite = 0.0
+    """Field phase σ_k at t = 0, rad."""
     max_current: Optional[NonNegative] = None  # A; default: derived from the scene (gyro_sim/scenes/limits.py)
+    """Largest current a command may set, A; None: 10 × the scene's largest field b·I (at least 0.1 T) over b_k."""
     max_rate: Optional[NonNegative] = None  # rad/s; default: derived from the scene
+    """Largest |field rate| a command may set, rad/s; None: 10 × the scene's fastest rate, at least 1e4 rad/s."""
 
     @field_validator("axis")
     @classmethod
@@ -199,25 +223,45 @@ class Stator(_Strict):
 
 
 class FieldTerm(_Strict):
+    """A term of the general uniform field (an entry of ``field``): B(t) = Re Σ B_p exp(−i ω_p t), case frame."""
+
     real: Vec3
+    """Re B_p of the term B(t) = Re Σ B_p exp(−i ω_p t), case frame, T."""
     imag: Vec3 = [0.0, 0.0, 0.0]
+    """Im B_p, case frame, T."""
     frequency: NonNegative = 0.0
+    """Angular frequency ω_p of the term, rad/s (0: a constant field)."""
 
 
 class Command(_Strict):
+    """A stator command at a given time (an entry of ``commands``); the field phase stays continuous."""
+
     time: NonNegative
+    """When the command takes effect, s (simulated time)."""
     stator: str
+    """Name of the stator it commands."""
     current: Optional[NonNegative] = None
+    """New current amplitude, A; None: unchanged."""
     rate: Optional[Finite] = None
+    """New field rotation rate, rad/s (signed); None: unchanged. The field phase stays continuous."""
 
 
 class Initial(_Strict):
+    """The state at t = 0 (``initial``): |L| (spin or kinetic_moment), the direction of L and the body's Euler
+    angles ψ, θ, φ in the L-frame (z-x-z)."""
+
     spin: Optional[Finite] = None
+    """Initial spin |L|/J3, rad/s (give this or kinetic_moment; neither: a rotor at rest)."""
     kinetic_moment: Optional[NonNegative] = None
+    """Initial |L|, N·m·s (instead of spin)."""
     L_direction: Vec3 = [0.0, 0.0, 1.0]
+    """Direction of the initial kinetic moment L in the case frame (dimensionless; normalised)."""
     psi: Finite = 0.0
+    """Initial precession angle ψ of the body in the L-frame (z-x-z Euler angles), rad."""
     theta: real(ge=0, le=math.pi) = 0.0
+    """Initial nutation angle θ between the polar axis x3 and L, rad (0 to π)."""
     phi: Finite = 0.0
+    """Initial proper-rotation angle φ, rad."""
 
     @model_validator(mode="after")
     def _one_magnitude(self) -> "Initial":
@@ -244,8 +288,11 @@ class OutputWindow(_Strict):
     rate. ``fidelity: auto`` runs the full model inside it (the detail was asked for)."""
 
     start: NonNegative
+    """Start of the stretch, s."""
     end: Positive
+    """End of the stretch, s (after start)."""
     rate: Positive
+    """Samples per second of simulated time within the stretch, 1/s."""
 
     @model_validator(mode="after")
     def _ordered(self) -> "OutputWindow":
@@ -268,8 +315,12 @@ class Output(_Strict):
     changes nothing. The ROS simulator node and a run that records a bag always integrate it."""
 
     rate: Positive = 100.0
+    """Samples per second of simulated time, 1/s."""
     attitude: StrictBool = True
+    """False: the run need not report the attitude (an isotropic rotor without effects then skips it; q, Euler angles
+    NaN)."""
     windows: Annotated[list[OutputWindow], Field(max_length=MAX_WINDOWS)] = []
+    """Stretches sampled faster than rate (full model there under fidelity: auto)."""
 
     def sample_count(self, T: float) -> float:
         """An upper bound on ``sample_times(T).size``, computed without allocating (T s may ask for 1e20
@@ -315,10 +366,18 @@ class Output(_Strict):
 
 
 class Integrator(_Strict):
+    """The time stepper (``integrator``) and its knobs; the defaults are chosen from ``accuracy``."""
+
     method: Literal["auto", "lawson8", "etdrk4", "frozen_flow", "qs_flow"] = "auto"
-    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: from accuracy (gyro_sim/accuracy.py)
+    """Time stepper: auto (chosen per scene), lawson8, etdrk4 (stiff eddy modes), frozen_flow or qs_flow (long steps,
+    axisymmetric rotor)."""
+    steps_per_turn: Optional[count(ge=4, le=100000)] = None  # default: from accuracy (gyro_sim/scenes/accuracy.py)
+    """Steps per period of the fastest rotation (spin or field), a count; None: chosen from accuracy."""
     rate_change: Optional[real(gt=0.0, le=0.1)] = None  # frozen_flow, qs_flow; default: from accuracy
+    """frozen_flow, qs_flow: largest change of the body rate per step as a fraction of the fastest rate
+    (dimensionless); None: from accuracy."""
     max_step: Optional[Positive] = None
+    """Upper bound on the step, s; None: none."""
 
 
 class Accuracy(_Strict):
@@ -339,31 +398,56 @@ class Accuracy(_Strict):
     step knobs for them and reports its estimated error (``RunResult.error_estimate``; docs/accuracy.md)."""
 
     rtol: real(ge=1e-13, le=0.1) = DEFAULT_RTOL
+    """Relative tolerance on L over the run: max |L − L_true| / max |L_true| (dimensionless)."""
     attitude: Optional[real(ge=1e-13, le=10.0)] = DEFAULT_ATTITUDE  # null: no direction tolerance (only rtol)
+    """Tolerance on the directions of the rotor's axes, rad (the symmetry axis; the whole attitude of a body with three
+    different moments); None: only rtol."""
     phase: Optional[real(ge=1e-15, le=0.1)] = DEFAULT_PHASE  # relative to the phase turned; null: none
+    """Tolerance on the spin phase about the symmetry axis, relative to the phase turned over the run (dimensionless);
+    None: none."""
     phase_atol: Optional[real(ge=1e-13, le=1e6)] = None  # rad, absolute; wins over ``phase``
+    """Absolute tolerance on the spin phase, rad (instead of phase; it costs: the error grows with the turns); None:
+    none."""
 
 
 class Scene(_Strict):
     """A validated scene. ``source`` is the file it came from (None when built from a dict)."""
 
     name: str = "scene"
+    """The scene's name (default: the file name)."""
     description: str = ""
+    """One line saying what the scene shows."""
     rotor: Rotor
+    """The rotor: inertia and conductor."""
     torque_model: Literal["none", "quasi_static", "lag"] = "lag"
+    """Electrodynamic torque: none, quasi_static ([K] (1.2), slips ≪ 1/τ) or lag (eddy-current modes, any slip;
+    docs/physics.md §3)."""
     accuracy: Accuracy = Accuracy()
+    """What the run must hold over its whole duration (tolerances on L, attitude and spin phase)."""
     modes: Optional[count(ge=1, le=500)] = None  # None: chosen from accuracy (gyro_sim.accuracy.mode_plan)
+    """Eddy-current modes kept by the lag model of a solid sphere or shell, a count; None: chosen from accuracy."""
     stators: list[Stator] = []
+    """The stators: rotating fields B_k = b_k I_k (e1k cos σ_k + e2k sin σ_k)."""
     field: list[FieldTerm] = []
+    """A general uniform field B(t) = Re Σ B_p exp(−i ω_p t), T, added to the stators' fields."""
     commands: list[Command] = []
+    """Piecewise-constant stator commands at given times (the field phase stays continuous)."""
     initial: Initial = Initial()
+    """The state at t = 0: kinetic moment and the body's Euler angles in the L-frame."""
     duration: Positive
+    """Simulated time of the run, s."""
     output: Output = Output()
+    """What the run reports: sample rate (1/s), windows sampled faster, attitude or not."""
     integrator: Integrator = Integrator()
+    """The time stepper and its knobs (defaults chosen from accuracy)."""
     controller: Optional[ControllerConfig] = None
+    """A control law of gyro_ctl run every period (s); None: no controller (commands only)."""
     fidelity: Literal["full", "averaged", "auto"] = "full"
+    """full (the full model), averaged (the slow averaged equations) or auto (averaged where they hold)."""
     effects: Effects = Effects()
+    """Other torques and internal bodies: unbalance, gas_drag, magnetizable, flywheel, damper (all off by default)."""
     source: Optional[str] = None
+    """The file the scene was loaded from (None when built from a dict)."""
 
     @model_validator(mode="after")
     def _consistent(self) -> "Scene":

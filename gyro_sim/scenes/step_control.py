@@ -29,7 +29,7 @@ STEP_ERROR = {
 }
 #: frozen-flow step: the error per turn is about K ε² with ε = rate_change (second order in the step)
 FROZEN_ERROR = {"L": 3e-6, "q": 1e-2}
-#: quasi-static flow step (gyro_sim/qs_flow.py): the error per turn is about K ε² with ε = rate_change, K the
+#: quasi-static flow step (gyro_sim/compiled/qs_flow.py): the error per turn is about K ε² with ε = rate_change, K the
 #: frozen-flow step's: at equal rate_change its errors were never larger than the frozen-flow step's on the
 #: quasi-static scenes (the same in L, far smaller in the attitude of a spin-up: third order there), docs/accuracy.md
 QS_FLOW_ERROR = {"order": 2, "L": FROZEN_ERROR["L"], "q": FROZEN_ERROR["q"]}
@@ -222,9 +222,10 @@ def auto_plan(plan: StepPlan, scene) -> StepPlan:
 #: order of each stepper (Richardson: the error of a run is its difference from a run with steps R times longer
 #: over R^p − 1); the free stepper of an axisymmetric or spherical body is exact
 ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 1, "free": 8, "qs_flow": 1}
-#: qs_flow (gyro_sim/qs_flow.py) converges at second to third order, but not monotonically: its error terms beat with
-#: the field's ripple (f h mod 2π), and the ratio of its errors at 2h and h measured 1.3 to 13 (docs/accuracy.md);
-#: its stretches are estimated at order 1 (the run's difference from its shadow), as the stiff ETDRK4's below.
+#: qs_flow (gyro_sim/compiled/qs_flow.py) converges at second to third order, but not monotonically: its error terms
+#: beat with the field's ripple (f h mod 2π), and the ratio of its errors at 2h and h measured 1.3 to 13
+#: (docs/accuracy.md); its stretches are estimated at order 1 (the run's difference from its shadow), as the stiff
+#: ETDRK4's below.
 #: ETDRK4 with steps longer than the fastest eddy mode's τ (a stiff step) is far from its order 4: measured on
 #: constant_field (τ = 0.26 ms) its error falls as h^1.4 to h^2 for h from 8 τ to 2 τ (order reduction; Hochbruck &
 #: Ostermann 2005), and the Richardson estimate at order 4 was 6 to 10 times too small. Its stretches are estimated

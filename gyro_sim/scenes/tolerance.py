@@ -39,7 +39,7 @@ _GRID = 240
 
 #: the fixed knobs of the runs before the accuracy plan (issue 19): 10 eddy modes with the tail, 12 lawson8 / 48
 #: ETDRK4 / 48 free steps per turn, rate_change 1e-4, no shadow run. :func:`legacy` switches them on (the benchmark's
-#: "today's defaults"; gyro_sim/bench_accuracy.py)
+#: "today's defaults"; gyro_sim/apps/bench_accuracy.py)
 LEGACY_MODES = 10
 LEGACY_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
 LEGACY_RATE_CHANGE = 1e-4
