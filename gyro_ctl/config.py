@@ -4,15 +4,15 @@ from __future__ import annotations
 import math
 from typing import Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from .reorient import ReorientParams
 
 from .numbers import Finite, NonNegative, Positive, real
+from .strict_model import StrictModel
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = StrictModel  # (unknown keys refused, immutable: gyro_ctl/strict_model.py)
 
 
 class SpinupParams(_Strict):
