@@ -488,5 +488,10 @@ def _require_extras(parquet: bool, in_process: bool, what: str = "gyro-sim sweep
     from gyro_sim.common.extras import missing, require
 
     modules = ("pyarrow",) * parquet + ("dask", "distributed") * (not in_process)
-    dask_gone = not in_process and {"dask", "distributed"} & set(missing("sweep", modules))
-    require("sweep", what, modules, hint="; or --workers 0 to run in this process" if dask_gone else "")
+    gone = set(missing("sweep", modules))
+    hint = ""
+    if "pyarrow" in gone:  # (--workers 0 writes the same Parquet table: it is no way round a missing pyarrow)
+        hint = "; the results table is Parquet, written with pyarrow with or without Dask: pip install pyarrow at least"
+    elif not in_process and {"dask", "distributed"} & gone:
+        hint = "; or --workers 0 to run in this process"
+    require("sweep", what, modules, hint=hint)
