@@ -69,6 +69,12 @@ def _legend_texts(legend):
     return [t.get_text() for t in legend.get_texts()]
 
 
+def _series_labels(ax):
+    """The stators' series drawn on a panel: lines and envelopes (min–max per time bin, plotting._draw_series)."""
+    labels = [h.get_label() for h in ax.get_lines() + [c for c in ax.collections if c.get_gid() == "envelope"]]
+    return sorted(lab.replace(" (min–max per time bin)", "") for lab in labels if not lab.startswith("_"))
+
+
 def _segments_x(ax, gid):
     (coll,) = [c for c in ax.collections if c.get_gid() == gid]
     return sorted(float(seg[0][0]) for seg in coll.get_segments())
@@ -262,8 +268,7 @@ def test_plot_of_a_recorded_bag_shows_slip_and_switching(tmp_path):
     ev_run, ev_bag = command_events(r), command_events(res)
     assert ev_run.switching.size > 3 and np.allclose(ev_bag.switching, ev_run.switching)
     fig = plot_run(res)
-    slip_lines = [ln.get_label() for ln in _axis(fig, "slip").get_lines() if not ln.get_label().startswith("_")]
-    assert slip_lines == ["z1", "z2", "z3"]
+    assert _series_labels(_axis(fig, "slip")) == ["z1", "z2", "z3"]
     assert _segments_x(_axis(fig, "events"), "switching") == pytest.approx(sorted(ev_run.switching))
     png = tmp_path / "p.png"
     assert cli.main(["plot", str(tmp_path / "bag"), "--out", str(png)]) == 0
