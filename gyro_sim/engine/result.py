@@ -173,7 +173,7 @@ INSTALL_DATA = "pip install 'gyro_sim[data]'"
 #: the time series of a RunResult: attribute → (unit, frame, description). The frame of omega_b, spin_rate and
 #: modes is the case frame in a run without attitude (:func:`_frame`).
 SERIES = {
-    "L": ("N m s", "case", "angular momentum L"),
+    "L": ("N m s", "case", "kinetic moment (angular momentum) L"),
     "q": ("1", "body to case", "attitude quaternion (w, x, y, z), body to case"),
     "omega_b": ("rad/s", "body", "angular velocity of the rotor"),
     "euler": ("rad", "L-frame", "Euler angles psi, theta, phi of the body in the L-frame"),

@@ -165,7 +165,7 @@ class Simulator:
     # --- named views of the state -------------------------------------------------------------
     @property
     def L(self) -> np.ndarray:
-        """Angular momentum L now, (3,) N·m·s, case frame (a copy of y[0:3]: the state moves on)."""
+        """Kinetic moment (angular momentum) L now, (3,) N·m·s, case frame (a copy of y[0:3]: the state moves on)."""
         return self.y[0:3].copy()
 
     @property
