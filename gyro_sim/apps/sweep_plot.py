@@ -37,10 +37,10 @@ def _draw_marks(ax, marks, name: str, xkey_unit: str) -> bool:
     for k, m in enumerate(marks or []):
         style = dict(color=f"C{3 + k}", ls="--", lw=1.2, gid="mark")
         if "x" in m:
-            ax.axvline(m["x"], **style, label=f"{m['label']} = {m['x']:.3g}{' ' + xkey_unit if xkey_unit else ''}")
+            ax.axvline(m["x"], **style, label=f"{m['label']} ({m['x']:.3g}{' ' + xkey_unit if xkey_unit else ''})")
             drawn = True
         elif m.get("metric") == name:
-            ax.axhline(m["y"], **style, label=f"{m['label']} = {m['y']:.3g}")
+            ax.axhline(m["y"], **style, label=f"{m['label']} ({m['y']:.3g})")
             drawn = True
     return drawn
 

@@ -137,7 +137,7 @@ def system_energy(scene: Scene, omega_b: np.ndarray, effects: dict) -> np.ndarra
     if damper is not None and "damper_offset" in effects:
         from gyro_sim.physics.klt import damper_energy
 
-        E = damper_energy(omega_b, J, damper.mass, damper.radius, damper.stiffness, effects["damper_offset"],
+        E = damper_energy(omega_b, list(J), damper.mass, damper.radius, damper.stiffness, effects["damper_offset"],
                           effects["damper_velocity"])
     else:
         E = kinetic_energy(J, omega_b)

@@ -111,10 +111,11 @@ def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Opti
     ``scene``: a Scene, a built-in name or a path (default: the scene text in the bag). The sample times are the
     simulation's own grid (the Runner's for ``duration`` and ``control_period`` as the run had them; defaults from
     the bag's custom data, else the scene's): the same bits as the in-process run, not the ns stamps rounded.
-    ``energy`` is the rotor's with its internal bodies (:func:`gyro_sim.engine.model.system_energy`); ``commands`` are those the bag holds (the controller's, the
-    scene's schedule and the watchdog's zeroing as applied: not the scene's initial settings); ``modes`` (not
-    recorded) has no columns; ``wall_time``, ``steps`` and the error estimate come from the bag's custom data
-    (``compile_time`` too where the recorder wrote it). Bags always hold the attitude (``attitude`` True)."""
+    ``energy`` is the rotor's with its internal bodies (:func:`gyro_sim.engine.model.system_energy`); ``commands``
+    are those the bag holds (the controller's, the scene's schedule and the watchdog's zeroing as applied: not the
+    scene's initial settings); ``modes`` (not recorded) has no columns; ``wall_time``, ``steps`` and the error
+    estimate come from the bag's custom data (``compile_time`` too where the recorder wrote it). Bags always hold
+    the attitude (``attitude`` True)."""
     from gyro_sim.io.bag_reader import bag_effects
     from gyro_sim.io.recording import BagData
     from gyro_sim.io.recording import read_bag as read_bag_data
