@@ -505,8 +505,8 @@ def test_measure_reports_the_figures(capsys):
 
 @pytest.mark.parametrize("hidden", [("pyarrow",), ("pyarrow", "dask", "distributed")])
 def test_missing_pyarrow_hint_says_what_to_install(hidden, monkeypatch, tmp_path, capsys):
-    """Without pyarrow (and Dask) the hint said "or --workers 0", which fails the same way (the results table is
-    Parquet either way): it now says to install pyarrow, and --workers 0 gives the same line."""
+    """Without pyarrow and Dask the hint said "or --workers 0", which fails the same way (the results table is
+    Parquet either way): the line says what to install, with or without --workers 0."""
     for name in hidden:
         monkeypatch.setitem(sys.modules, name, None)
     lines = []
@@ -517,5 +517,6 @@ def test_missing_pyarrow_hint_says_what_to_install(hidden, monkeypatch, tmp_path
         assert code == 2 and len(err) == 1, (code, err)
         lines.append(err[0])
     for line in lines:
-        assert "pip install pyarrow" in line and "missing: pyarrow" in line and "--workers 0 to run" not in line, line
+        assert "pip install 'gyro_sim[sweep]' (missing: pyarrow" in line and "--workers 0" not in line, line
+    assert all(line.startswith("error: gyro-sim sweep needs") for line in lines)
     assert not (tmp_path / "r.parquet").exists()

@@ -489,9 +489,7 @@ def _require_extras(parquet: bool, in_process: bool, what: str = "gyro-sim sweep
 
     modules = ("pyarrow",) * parquet + ("dask", "distributed") * (not in_process)
     gone = set(missing("sweep", modules))
-    hint = ""
-    if "pyarrow" in gone:  # (--workers 0 writes the same Parquet table: it is no way round a missing pyarrow)
-        hint = "; the results table is Parquet, written with pyarrow with or without Dask: pip install pyarrow at least"
-    elif not in_process and {"dask", "distributed"} & gone:
-        hint = "; or --workers 0 to run in this process"
+    # --workers 0 is a way round a missing Dask only: it writes the same Parquet table (pyarrow)
+    hint = "; or --workers 0 to run in this process" if not in_process and {"dask", "distributed"} & gone \
+        and "pyarrow" not in gone else ""
     require("sweep", what, modules, hint=hint)
