@@ -4,16 +4,15 @@ from __future__ import annotations
 import math
 from typing import Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from .reorient import ReorientParams
 
 from .numbers import Finite, NonNegative, Positive, real
+from .strict_model import StrictModel
 
 
-class _Strict(BaseModel):
-    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
-    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
+_Strict = StrictModel  # (unknown keys refused, immutable: gyro_ctl/strict_model.py)
 
 
 class SpinupParams(_Strict):

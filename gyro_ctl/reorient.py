@@ -43,9 +43,10 @@ from dataclasses import dataclass
 from typing import Annotated, Literal, Optional, Sequence
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from .numbers import Finite, NonNegative, Positive
+from .strict_model import StrictModel
 
 __all__ = [
     "Waypoint",
@@ -62,9 +63,7 @@ __all__ = [
 _EPS_T = 1e-9  # s: time tolerance of the waypoint schedule (the control input is stamped in ns)
 
 
-class _Strict(BaseModel):
-    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
-    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
+_Strict = StrictModel  # (unknown keys refused, immutable: gyro_ctl/strict_model.py)
 
 
 class Waypoint(_Strict):

@@ -45,6 +45,7 @@ def synthetic_run():
                 ("z3", [0, 0, 1], 1.0, TWO_PI * 500.0))]
     return SimpleNamespace(
         t=t, omega_b=omega, q=np.tile([1.0, 0.0, 0.0, 0.0], (N, 1)), L=1e-5 * omega,
+        torque=np.column_stack([np.zeros(N), np.zeros(N), np.full(N, 2e-6)]),
         euler=np.column_stack([np.zeros(N), np.full(N, math.radians(5.0)), np.zeros(N)]),
         current=np.array([s[0] for s in states]), field_rate=np.array([s[1] for s in states]),
         stator_names=["z1", "z2", "z3"], commands=commands, attitude=True,
@@ -67,6 +68,12 @@ def _axis(fig, ylabel_part):
 
 def _legend_texts(legend):
     return [t.get_text() for t in legend.get_texts()]
+
+
+def _series_labels(ax):
+    """The stators' series drawn on a panel: lines and envelopes (min–max per time bin, plotting._draw_series)."""
+    labels = [h.get_label() for h in ax.get_lines() + [c for c in ax.collections if c.get_gid() == "envelope"]]
+    return sorted(lab.replace(" (min–max per time bin)", "") for lab in labels if not lab.startswith("_"))
 
 
 def _segments_x(ax, gid):
@@ -111,7 +118,8 @@ def test_plot_run_returns_a_figure_with_slip_field_rate_and_command_marks(tmp_pa
     assert isinstance(fig, Figure)
     assert fig.get_suptitle() == "synthetic: spin-up under three stators"
     assert fig.axes[-1].get_xlabel() == "time (s)"
-    for part in ("events", "rotor rate (rev/s)", "nutation θ (deg)", "N·m·s", "stator current", "field rate ν/2π (Hz)",
+    for part in ("events", "rotor rate (rev/s)", "nutation θ (deg)", "|L| (", "direction of L", "torque on rotor",
+                 "stator current", "field rate ν/2π (Hz)",
                  "slip (ν − Ω·u)/2π (Hz)"):
         _axis(fig, part)
     # the slip panel: z3 = 500 − 50 t Hz, z1 ±300 Hz while on, z2 (never on) not drawn
@@ -156,7 +164,7 @@ def test_a_long_run_is_thinned():
     t = np.linspace(0.0, 100.0, n)
     r = synthetic_run()
     r.t, r.omega_b = t, np.column_stack([np.zeros(n), np.zeros(n), np.sin(t)])
-    r.q, r.L = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), 1e-5 * r.omega_b
+    r.q, r.L, r.torque = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), 1e-5 * r.omega_b, np.ones((n, 3))
     r.euler, r.current = np.zeros((n, 3)), np.ones((n, 3))
     r.field_rate = np.ones((n, 3))
     fig = plot_run(r)
@@ -224,15 +232,22 @@ def test_phase_portrait_legend_and_title_in_words():
                  "run start (t = 0 s)", "run end (t = 1 s)", "steady |L| for each θ (spin drive = braking)",
                  "the equilibria (at θ = 90°)"):
         assert want in texts
+    # the title says what the figure is in two lines; [K]'s symbols and predictions are defined in the legend
     title = fig.get_suptitle()
-    assert "rotor prolate: polar / transverse inertia J3/J = 0.8" in title
-    assert "equilibria at θ = 90°: switching torque < asymmetry torque (|s| = 0.5 ≤ 1)" in title
-    assert "no limit cycles: switching torque > polar-inertia torque" in title
-    # an axisymmetric rotor ([K]'s s = −∞): said in words, no infinity in the title
+    assert title.count("\n") == 1 and "symbols in the legend" in title and "κ" not in title
+    legend = " ".join(t.replace("\n", " ") for t in texts)
+    for want in ("How to read: x3 is the rotor's symmetry (polar) axis, L its kinetic moment (angular momentum)",
+                 "Λ0 = ", "rotor prolate: polar / transverse inertia J3/J = 0.8 (κ = J3/J − 1 = -0.2)",
+                 "δ = (J2 − J1)/(J2 + J1) = +0.01: transverse asymmetry",
+                 "equilibria at θ = 90°: switching torque < asymmetry torque (|s| = 0.5 ≤ 1; s = switching / "
+                 "asymmetry torque)", "no limit cycles: switching torque > polar-inertia torque",
+                 "p = switching / polar-inertia torque"):
+        assert want in legend, want
+    # an axisymmetric rotor ([K]'s s = −∞): said in words, no infinity
     fig = plot_phase(_phase_data(), scene=load_scene("nutation_oblate"))
-    title = fig.get_suptitle()
-    assert "axisymmetric (J1 = J2)" in title and "no equilibria: an axisymmetric rotor" in title
-    assert "∞" not in title and "s = " not in title
+    legend = " ".join(t.get_text().replace("\n", " ") for t in fig.legends[0].get_texts())
+    assert "axisymmetric (J1 = J2, δ = 0)" in legend and "no equilibria: an axisymmetric rotor" in legend
+    assert "∞" not in legend + fig.get_suptitle() and "s = " not in legend
 
 
 def test_bench_plot_legend_matches_the_lines_drawn():
@@ -262,9 +277,120 @@ def test_plot_of_a_recorded_bag_shows_slip_and_switching(tmp_path):
     ev_run, ev_bag = command_events(r), command_events(res)
     assert ev_run.switching.size > 3 and np.allclose(ev_bag.switching, ev_run.switching)
     fig = plot_run(res)
-    slip_lines = [ln.get_label() for ln in _axis(fig, "slip").get_lines() if not ln.get_label().startswith("_")]
-    assert slip_lines == ["z1", "z2", "z3"]
+    assert _series_labels(_axis(fig, "slip")) == ["z1", "z2", "z3"]
     assert _segments_x(_axis(fig, "events"), "switching") == pytest.approx(sorted(ev_run.switching))
     png = tmp_path / "p.png"
     assert cli.main(["plot", str(tmp_path / "bag"), "--out", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# --- plots an engineer reads without the papers (issue 33) -------------------------------------------------
+def _switching_run(n=4001, flips=400):
+    """The synthetic run with z1's field reversing ``flips`` times and θ damped from 10° to 1e-3° (a dead band of
+    0.01°), torques of a few µN·m: what ψ-switching does."""
+    r = synthetic_run()
+    t = np.linspace(0.0, T_END, n)
+    r.t = t
+    r.omega_b = np.column_stack([np.zeros(n), np.zeros(n), TWO_PI * 50.0 * t])
+    r.q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    r.L = np.column_stack([1e-4 * np.ones(n), np.zeros(n), 1e-3 + 1e-6 * t])
+    r.euler = np.column_stack([np.zeros(n), np.radians(10.0 * 10.0 ** (-2.0 * t)), np.zeros(n)])
+    sign = np.where(np.floor(t / T_END * flips) % 2 == 0, 1.0, -1.0)
+    r.current = np.column_stack([0.3 * np.ones(n), np.zeros(n), np.ones(n)])
+    r.field_rate = np.column_stack([TWO_PI * 300.0 * sign, np.zeros(n), TWO_PI * 500.0 * np.ones(n)])
+    r.torque = np.column_stack([3e-6 * sign, 1e-6 * np.ones(n), 2e-6 * np.ones(n)])
+    r.scene.controller = SimpleNamespace(law="psi_switching", params=SimpleNamespace(dead_band=math.radians(0.01)))
+    return r
+
+
+def _offset_texts(fig):
+    fig.canvas.draw()
+    return [(a.get_ylabel(), a.yaxis.get_offset_text().get_text()) for a in fig.axes
+            if a.yaxis.get_offset_text().get_text()]
+
+
+def test_theta_near_zero_on_a_log_axis_with_the_dead_band():
+    """θ on a linear axis hid the last 0.01° and the dead band: it is log scale where it spans > 30×."""
+    fig = plot_run(_switching_run())
+    ax = _axis(fig, "nutation θ")
+    assert ax.get_yscale() == "log" and ax.get_ylim()[0] < 1e-2
+    (band,) = [ln for ln in ax.get_lines() if ln.get_gid() == "dead_band"]
+    assert band.get_ydata()[0] == pytest.approx(0.01) and "dead band 0.01°" in band.get_label()
+    assert _axis(plot_run(synthetic_run()), "nutation θ").get_yscale() == "linear"  # 5° throughout
+
+
+def test_no_offset_labels_on_any_axis():
+    """The spin-up's θ axis showed "+2.864", L "1e-5"-type multipliers: every axis labels its own values."""
+    r = synthetic_run()
+    r.euler[:, 1] = np.radians(2.864 - 1e-5 * r.t)  # nearly constant, as a spin-up's θ
+    r.torque = np.column_stack([np.zeros(N), np.zeros(N), 1.5e-4 - 1e-9 * r.t])
+    for fig in (plot_run(r), plot_run(_switching_run())):
+        assert _offset_texts(fig) == []
+    ax = _axis(plot_run(r), "torque on rotor")
+    assert "(µN·m)" in ax.get_ylabel()
+
+
+def test_torque_panel_and_L_as_magnitude_and_direction():
+    fig = plot_run(_switching_run())
+    ax = _axis(fig, "torque on rotor")
+    assert "case frame (µN·m)" in ax.get_ylabel()
+    assert {"|N|", "N along z1"} <= {lab.replace(" (min–max per time bin)", "") for lab in
+                                      _legend_texts(ax.get_legend())}
+    ax = _axis(fig, "|L| (")
+    assert ax.get_ylabel() == "kinetic moment\n(angular momentum)\n|L| (mN·m·s)"
+    (mag,) = ax.get_lines()
+    assert np.allclose(mag.get_ydata(), 1e3 * np.hypot(1e-4, 1e-3 + 1e-6 * np.asarray(mag.get_xdata())), rtol=1e-9)
+    ax = _axis(fig, "direction of L")
+    assert ax.get_ylim() == pytest.approx((-1.08, 1.08))
+    z = [ln for ln in ax.get_lines() if ln.get_label() == "along z3"][0]
+    assert 0.99 < min(z.get_ydata()) <= max(z.get_ydata()) < 1.0
+
+
+def test_switching_series_are_envelopes():
+    """Field rate, slip and torque under switching: min..max per time bin, filled (not aliased line bands)."""
+    fig = plot_run(_switching_run())
+    for part in ("field rate", "slip", "torque on rotor"):
+        ax = _axis(fig, part)
+        env = [c for c in ax.collections if c.get_gid() == "envelope"]
+        assert env, part
+        edges = [ln for ln in ax.get_lines() if ln.get_gid() == "envelope_edge"]
+        assert edges and all(len(ln.get_xdata()) == 2 * plotting.ENVELOPE_BINS for ln in edges), part
+    rate = _axis(fig, "field rate")
+    assert _series_labels(rate) == ["z1", "z3"]  # z1 as an envelope, z3 (constant) as a line
+    (z3,) = [ln for ln in rate.get_lines() if ln.get_label() == "z3"]
+    assert np.allclose(z3.get_ydata(), 500.0)
+
+
+def test_one_name_for_L():
+    from gyro_sim.engine.result import SERIES
+
+    assert plotting.L_NAME == "kinetic moment (angular momentum)"
+    assert SERIES["L"][2].startswith(plotting.L_NAME)
+
+
+def test_sweep_plot_units_and_the_theory_s_marks():
+    """Sweep plots had no units and no theory: axis labels carry units, the spec's marks are drawn (h* = π/Λ)."""
+    from gyro_sim.apps.sweep_plot import plot_sweep
+    from gyro_sim.apps.sweep_spec import load_sweep
+    from gyro_sim.scenes.scene import config_dir
+
+    spec = load_sweep(config_dir() / "sweep_psi_rate.yaml")
+    meta = spec.meta()
+    (mark,) = meta["marks"]
+    assert mark["x"] == pytest.approx(0.0154, abs=5e-5)  # h* = π/Λ, Λ = |L0|/J = 204 rad/s (the spec's header)
+    rows = [{"status": "ok", "controller.period": h, "theta_end": 10.0 * h, "t_below": 0.5, "t_settle": 1.0,
+             "sf": math.sin(204 * h) / (204 * h)} for h in (0.002, 0.01, 0.02)]
+    fig = plot_sweep(rows, meta)
+    for ax in fig.axes:
+        if not ax.get_visible():
+            continue
+        assert ax.get_xlabel() == "controller.period (s)"
+        (line,) = [ln for ln in ax.get_lines() if ln.get_gid() == "mark"]
+        assert line.get_xdata()[0] == pytest.approx(mark["x"])
+        assert "h* = π/Λ" in " ".join(_legend_texts(ax.get_legend()))
+    labels = {ax.get_ylabel() for ax in fig.axes if ax.get_visible()}
+    assert labels == {"theta_end (deg)", "t_below (s)", "t_settle (s)", "sf (ratio)"}
+    # a y mark on its metric's panel: [K] (3.10)'s p = −p* in the k310 sweep
+    meta = load_sweep(config_dir() / "sweep_k310_cycles.yaml").meta()
+    (mark,) = meta["marks"]
+    assert mark["metric"] == "p" and mark["y"] == pytest.approx(-0.559, abs=1e-3)

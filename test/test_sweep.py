@@ -502,3 +502,22 @@ def test_measure_reports_the_figures(capsys):
     assert part["repeats"] == 2 and part["rounds"] == [7, 7] and "fastest of 2 passes" in capsys.readouterr().out
     with pytest.raises(sw.SweepError, match="unknown configuration"):
         sw.measure(spec, workers=1, configs=("three_workers",))
+
+
+@pytest.mark.parametrize("hidden", [("pyarrow",), ("pyarrow", "dask", "distributed")])
+def test_missing_pyarrow_hint_says_what_to_install(hidden, monkeypatch, tmp_path, capsys):
+    """Without pyarrow and Dask the hint said "or --workers 0", which fails the same way (the results table is
+    Parquet either way): the line says what to install, with or without --workers 0."""
+    for name in hidden:
+        monkeypatch.setitem(sys.modules, name, None)
+    lines = []
+    for workers in ([], ["--workers", "0"]):
+        code = sw.sweep_main(["nutation_oblate", "--vary", "controller.period=0.001,0.002", "--out",
+                              str(tmp_path / "r.parquet"), "--quiet", "--no-plot", *workers])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1, (code, err)
+        lines.append(err[0])
+    for line in lines:
+        assert "pip install 'gyro_sim[sweep]' (missing: pyarrow" in line and "--workers 0" not in line, line
+    assert all(line.startswith("error: gyro-sim sweep needs") for line in lines)
+    assert not (tmp_path / "r.parquet").exists()

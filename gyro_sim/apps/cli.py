@@ -114,6 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a built-in scene name (see 'gyro-sim scenes') or a path to a scene YAML file")
     run.add_argument("--duration", metavar="S", type=_positive_seconds, default=None,
                      help="simulated time in seconds (default: the scene's duration)")
+    run.add_argument("--set", metavar="KEY=VALUE", action="append", default=[],
+                     help="change a value of the scene, a dotted key from its top (repeatable; the syntax of "
+                          "gyro-sim sweep --set): --set stators.2.current=0.5 --set initial.theta=0.1 "
+                          "--set controller=null (docs/scenes.md)")
     run.add_argument("--out", metavar="DIR", type=Path, default=Path("runs"),
                      help="folder for the plot (default: runs/)")
     run.add_argument("--record", metavar="BAG", type=Path, default=None,

@@ -125,7 +125,13 @@ def _cmd_run(args) -> int:
     if args.ros and args.fidelity not in (None, "full"):
         return _error(f"--fidelity {args.fidelity}: the ROS simulator node runs the full model; drop --ros or --fidelity")
     try:
-        scene = scene_mod.load_scene(args.scene, overrides={"fidelity": args.fidelity} if args.fidelity else None)
+        overrides = _set_overrides(args.set)
+    except ValueError as exc:
+        return _error(str(exc))
+    if args.fidelity:
+        overrides["fidelity"] = args.fidelity
+    try:
+        scene = scene_mod.load_scene(args.scene, overrides=overrides or None)
         if args.duration is not None:  # the limits the scene file's own duration met on loading, before any work
             from gyro_sim.engine.budget import check_run_size
 
@@ -138,7 +144,15 @@ def _cmd_run(args) -> int:
             bad = _over_budget(scene, args.duration)
             if bad:
                 return _error(bad)
-        return _run_ros(args, scene, name)
+        src = scene.source or args.scene
+        if args.set:  # the nodes load a file: the changed scene is written for them
+            src = Path(args.out) / f"{name}_set.yaml"
+            try:
+                _write_scene(scene, src)
+            except OSError as exc:
+                return _error(f"cannot write the changed scene {src}: {exc.strerror or exc}")
+            _write(sys.stderr, f"scene with --set written to {src}\n")
+        return _run_ros(args, scene, name, src)
     force = {"force": True} if args.force else {}
     from gyro_sim.compiled.compile_watch import announce_compiles
 
@@ -316,7 +330,31 @@ def _unwritable_out(out: Path):
     return None
 
 
-def _run_ros(args, scene, name) -> int:
+def _set_overrides(texts) -> dict:
+    """The ``--set KEY=VALUE`` options as scene overrides (dotted key → value), parsed as ``gyro-sim sweep --set``
+    parses them (gyro_sim/apps/sweep_axes.py: numbers, true/false, null, [a, b] lists, else text); ValueError (one
+    line) for one without ``=`` or with an empty key."""
+    from gyro_sim.apps.sweep_axes import _parse_value, _split_assignment
+
+    out = {}
+    for text in texts:
+        key, value = _split_assignment(text, "--set")
+        if not key:
+            raise ValueError(f"--set {text!r}: expected KEY=VALUE with a dotted key, e.g. stators.2.current=0.5")
+        out[key] = _parse_value(value)
+    return out
+
+
+def _write_scene(scene, path: Path) -> None:
+    """Write ``scene`` as a scene file (YAML) that loads back as the same scene."""
+    from gyro_sim.scenes.scene_text import dump_scene_data
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("# written by gyro-sim run --set (the scene with its changes)\n"
+                    + dump_scene_data(scene.model_dump(mode="json", exclude={"source"})), encoding="utf-8")
+
+
+def _run_ros(args, scene, name, src) -> int:
     """Both nodes as processes over DDS; the bag they record is summarised and plotted, also that of a run stopped by
     SIGINT/SIGTERM (exit status 130/143; see gyro_sim.ros.launch for the signals)."""
     import signal
@@ -325,7 +363,6 @@ def _run_ros(args, scene, name) -> int:
     from gyro_sim.ros.launch import launch
 
     bag = args.record or Path(args.out) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
-    src = scene.source or args.scene
     code = launch(src, mode=args.mode, record=str(bag), duration=args.duration, rate_factor=args.rate_factor,
                   with_controller=scene.controller is not None, force=args.force)
     if code == 0:

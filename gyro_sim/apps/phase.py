@@ -21,6 +21,7 @@ torque model the curves are drawn but marked as indicative only.
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import Optional
 
 import numpy as np
@@ -158,7 +159,7 @@ def plot_phase(result_or_bag_data, path=None, scene=None, phi_convention: str = 
         or getattr(data, "scene_name", None) or "gyro_sim run"
     model, note = portrait_model(sc)
 
-    fig = new_figure((13.0, 7.0))
+    fig = new_figure((13.0, 8.5))
     ax, axL = fig.subplots(1, 2, sharey=True, width_ratios=[1.6, 1.0])
     cmap = colormaps["viridis"]
     norm = Normalize(vmin=float(t[0]) if n else 0.0, vmax=float(t[-1]) if n and t[-1] > t[0] else 1.0)
@@ -234,6 +235,7 @@ def plot_phase(result_or_bag_data, path=None, scene=None, phi_convention: str = 
                      label=f"limit cycle {'r⁺' if c.name == 'r+' else 'r₋'} ({'stable' if c.stable else 'unstable'})")
             legend.append(Line2D([], [], color=col, ls=ls, lw=1.6, label=lab))
         title = _title(name, getattr(sc, "description", None), model, bool(eqs), note)
+        legend += [Line2D([], [], ls="none", label=text) for text in _symbols(model, bool(eqs), note)]
     else:
         title = _title(name, getattr(sc, "description", None), None, False, note)
 
@@ -277,8 +279,10 @@ def plot_phase(result_or_bag_data, path=None, scene=None, phi_convention: str = 
     for a in (ax, axL):
         a.grid(True, alpha=0.3)
     handles = legend + [h for h in axL.get_legend_handles_labels()[0]]
+    for h in handles:  # (two columns fit the figure's width)
+        h.set_label("\n".join(textwrap.wrap(h.get_label().replace("\n", " "), 88)))
     if handles:  # one legend under both panels: it hides no trajectory
-        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
+        fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=10)
 
     if path is not None:
@@ -290,8 +294,8 @@ def _shape_words(model) -> str:
     """The rotor's inertia in words: prolate/oblate (κ), transverse asymmetry (δ)."""
     k, d = model.kappa, model.rotor.delta
     shape = "oblate" if k > 0 else ("prolate" if k < 0 else "spherical inertia")
-    asym = "axisymmetric (J1 = J2)" if d == 0 else f"transverse asymmetry (J2 − J1)/(J2 + J1) = {d:+.3g} (δ)"
-    return f"rotor {shape}: polar / transverse inertia J3/J = {1 + k:.3g} (κ = {k:+.3g}), {asym}"
+    asym = "axisymmetric (J1 = J2, δ = 0)" if d == 0 else f"δ = (J2 − J1)/(J2 + J1) = {d:+.3g}: transverse asymmetry"
+    return f"rotor {shape}: polar / transverse inertia J3/J = {1 + k:.3g} (κ = J3/J − 1 = {k:+.3g}); {asym}"
 
 
 def _equilibria_words(model, has_eq: bool) -> str:
@@ -300,8 +304,10 @@ def _equilibria_words(model, has_eq: bool) -> str:
     if not math.isfinite(s):
         return "no equilibria: an axisymmetric rotor (δ = 0) has no preferred φ"
     if has_eq:
-        return f"equilibria at θ = 90°: switching torque < asymmetry torque (|s| = {abs(s):.3g} ≤ 1)"
-    return f"no equilibria: switching torque > asymmetry torque (|s| = {abs(s):.3g} > 1)"
+        return (f"equilibria at θ = 90°: switching torque < asymmetry torque (|s| = {abs(s):.3g} ≤ 1; s = switching "
+                "/ asymmetry torque)")
+    return (f"no equilibria: switching torque > asymmetry torque (|s| = {abs(s):.3g} > 1; s = switching / asymmetry "
+            "torque)")
 
 
 def _cycles_words(model) -> str:
@@ -310,17 +316,31 @@ def _cycles_words(model) -> str:
     if not math.isfinite(p):
         return "no limit cycles: no polar-inertia torque (κ = 0)"
     if model.cycles_exist():
-        return f"limit cycles: polar-inertia torque balances the switching (p² = {p * p:.3g} ≤ {model.p_star_sq:.3g})"
-    return f"no limit cycles: switching torque > polar-inertia torque (p² = {p * p:.3g} > {model.p_star_sq:.3g})"
+        return (f"limit cycles: polar-inertia torque balances the switching (p² = {p * p:.3g} ≤ p*² = "
+                f"{model.p_star_sq:.3g}; p = switching / polar-inertia torque)")
+    return (f"no limit cycles: switching torque > polar-inertia torque (p² = {p * p:.3g} > p*² = "
+            f"{model.p_star_sq:.3g}; p = switching / polar-inertia torque)")
+
+
+def _symbols(model, has_eq: bool, note: str) -> list:
+    """Legend lines defining [K]'s symbols for this rotor and what they predict, in plain words."""
+    lines = ["How to read: x3 is the rotor's symmetry (polar) axis, L its kinetic moment (angular momentum); "
+             "θ = 0 means\nx3 along L (no nutation). Grey arrows: where the averaged motion goes; the run is the "
+             "coloured line.",
+             f"Λ0 = {model.Lam0:.4g} rad/s: the precession rate |L|/J the spin drive holds at θ = 0 (J: transverse "
+             "inertia)",
+             _shape_words(model)]
+    lines.append(_equilibria_words(model, has_eq))
+    lines.append(_cycles_words(model))
+    if note:
+        lines.append(f"({note})")
+    return lines
 
 
 def _title(name, description, model, has_eq: bool, note: str) -> str:
-    """Scene, then (with a model) the rotor and what the averaged ψ-switching model predicts, in words."""
+    """Two lines: the scene, then what the figure is (the symbols and predictions are in the legend)."""
     head = f"{name}: {description}" if description else name
     if model is None:
         return f"{head}\ntrajectory only: {note}"
-    lines = [head, "curves: averaged model of ψ-switching nutation control ([K] §3); " + _shape_words(model),
-             _equilibria_words(model, has_eq) + ".  " + _cycles_words(model)]
-    if note:
-        lines.append(f"({note})")
-    return "\n".join(lines)
+    return (f"{head}\nphase portrait: nutation θ against the rotation angle φ and |L| under ψ-switching, over the "
+            "averaged model of [K] §3 (symbols in the legend)")

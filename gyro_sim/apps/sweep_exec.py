@@ -488,5 +488,8 @@ def _require_extras(parquet: bool, in_process: bool, what: str = "gyro-sim sweep
     from gyro_sim.common.extras import missing, require
 
     modules = ("pyarrow",) * parquet + ("dask", "distributed") * (not in_process)
-    dask_gone = not in_process and {"dask", "distributed"} & set(missing("sweep", modules))
-    require("sweep", what, modules, hint="; or --workers 0 to run in this process" if dask_gone else "")
+    gone = set(missing("sweep", modules))
+    # --workers 0 is a way round a missing Dask only: it writes the same Parquet table (pyarrow)
+    hint = "; or --workers 0 to run in this process" if not in_process and {"dask", "distributed"} & gone \
+        and "pyarrow" not in gone else ""
+    require("sweep", what, modules, hint=hint)

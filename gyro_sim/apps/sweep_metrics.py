@@ -107,7 +107,7 @@ DEFAULT_METRICS = ("final_spin", "final_theta_deg", "max_torque", "L_drift")
 #: k(NAME[, x]): quantities of the averaged ψ-switching model of [K] §3 for the variant's scene
 #: (gyro_sim.averaged.PsiSwitchingK.of_scene); they need no run.
 _K_ATTRS = ("p", "s", "p_star", "V", "Lam0", "W0", "kappa", "delta", "q", "equilibria", "cycles",
-            "r_minus_deg", "r_plus_deg", "sampling_factor", "time_to_deg")
+            "r_minus_deg", "r_plus_deg", "sampling_factor", "time_to_deg", "h_star")
 
 
 def _initial_L(scene) -> float:
@@ -144,11 +144,42 @@ def _k_metric(scene, name: str, xs: Sequence[float]) -> float:
         h = controller_period(scene)
         x = _initial_L(scene) / m.rotor.J * h
         return math.sin(x) / x if x else 1.0
+    if name == "h_star":  # s: the control period where the sampled drive changes sign, Λh = π (docs/sweeps.md)
+        return math.pi * m.rotor.J / _initial_L(scene)
     if name == "time_to_deg":
         if len(xs) != 1:
             raise ValueError("k(time_to_deg, x) takes one angle in degrees")
         return float(m.time_to_theta(scene.initial.theta, math.radians(xs[0]), L0=_initial_L(scene)))
     raise ValueError(f"k({name}): allowed {', '.join(_K_ATTRS)}")
+
+
+#: units of the quantities (plot labels; "1": a ratio)
+QUANTITY_UNITS = {"t": "s", "spin": "rad/s", "spin_rev_s": "rev/s", "omega_norm": "rad/s", "theta": "rad",
+                  "theta_deg": "deg", "psi": "rad", "phi": "rad", "L_norm": "N·m·s", "L_x": "N·m·s", "L_y": "N·m·s",
+                  "L_z": "N·m·s", "energy": "J", "torque_norm": "N·m"}
+#: units of the k(NAME) quantities ("1": a ratio, "": a count)
+K_UNITS = {"p": "1", "s": "1", "p_star": "1", "V": "1/s", "Lam0": "rad/s", "W0": "rad/s", "kappa": "1",
+           "delta": "1", "q": "1", "equilibria": "", "cycles": "", "r_minus_deg": "deg", "r_plus_deg": "deg",
+           "sampling_factor": "1", "time_to_deg": "s", "h_star": "s"}
+
+
+def metric_unit(text: str) -> str:
+    """The unit of a metric given as ``FUNC(ARGS)`` (or an alias): "s", "deg", "1" (a ratio), "" (a count or
+    unknown)."""
+    try:
+        m = parse_metric(text)
+    except SweepError:
+        return ""
+    if m.func == "k":
+        return K_UNITS.get(str(m.args[0]), "")
+    if m.func in ("time_below", "time_above", "settle_below", "wall_time"):
+        return "s"
+    if m.func == "drift":
+        return "1"
+    if m.func == "steps" or not m.args:
+        return ""
+    q = str(m.args[0])
+    return QUANTITY_UNITS.get(q, "A" if q.startswith("current_") else "")
 
 
 @dataclass(frozen=True)

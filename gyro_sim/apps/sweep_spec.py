@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Optional
 
 from gyro_sim import __version__
-from gyro_sim.apps.sweep_axes import SweepError, _parse_value, _plain, parse_axis, parse_random
+from gyro_sim.apps.sweep_axes import SweepError, _is_number, _parse_value, _plain, parse_axis, parse_random
 from gyro_sim.apps.sweep_metrics import DEFAULT_METRICS, QUANTITIES, parse_metric
 from gyro_sim.scenes.scene import SceneError, apply_overrides, builtin_scenes, config_dir, scene_from_dict
 from gyro_sim.scenes.scene_text import parse_scene_text, read_scene_file
@@ -47,6 +47,9 @@ class SweepSpec:
     series_points: int = 1000
     description: str = ""
     default_metrics: bool = False  # the metrics are DEFAULT_METRICS (a --metric replaces them)
+    # the theory's values drawn on the plot: {label, x or y, metric (with y)}, a value a number or [-]k(NAME)
+    marks: list = field(default_factory=list)
+    mark_values: list = field(default_factory=list)  # the marks with their values (check())
 
     # --- checks ----------------------------------------------------------------------------
     def check(self) -> "SweepSpec":
@@ -82,7 +85,33 @@ class SweepSpec:
                 raise SweepError(f"series {q!r}: unknown quantity; allowed: {', '.join(QUANTITIES)}, current_<stator>")
         if self.series_points < 2:
             raise SweepError("series_points must be ≥ 2")
+        self.mark_values = [self._mark(m, names) for m in self.marks]
         return self
+
+    def _mark(self, mark, metric_names) -> dict:
+        """A mark of the plot with its value: {label, x: value} (a line across every panel at that value of the
+        first grid key) or {label, y: value, metric: NAME} (across that metric's panel); a value is a number or
+        ``k(NAME)`` / ``-k(NAME)`` of the base scene (sweep_metrics._k_metric)."""
+        if not isinstance(mark, dict) or not isinstance(mark.get("label"), str) or \
+                len({"x", "y"} & set(mark)) != 1 or set(mark) - {"label", "x", "y", "metric"}:
+            raise SweepError(f"marks: {mark!r}: expected {{label: TEXT, x: VALUE}} or {{label: TEXT, y: VALUE, "
+                             f"metric: NAME}}")
+        axis = "x" if "x" in mark else "y"
+        if axis == "y" and mark.get("metric") not in metric_names:
+            raise SweepError(f"marks: {mark['label']!r}: metric = {mark.get('metric')!r}; allowed: "
+                             f"{', '.join(metric_names)}")
+        value = mark[axis]
+        if not _is_number(value):
+            text = str(value).strip()
+            sign = -1.0 if text.startswith("-") else 1.0
+            m = parse_metric(text.lstrip("-"))
+            if m.func != "k":
+                raise SweepError(f"marks: {mark['label']!r}: {axis} = {value!r}: a number or [-]k(NAME)")
+            try:
+                value = sign * m.evaluate(None, self.scene_for({}))
+            except (ValueError, SceneError) as e:
+                raise SweepError(f"marks: {mark['label']!r}: {axis} = {text}: {e}") from None
+        return {"label": mark["label"], axis: float(value), **({"metric": mark["metric"]} if axis == "y" else {})}
 
     # --- variants --------------------------------------------------------------------------
     @property
@@ -124,7 +153,7 @@ class SweepSpec:
                 "vary": {a.key: a.spec for a in self.grid}, "grid": [a.key for a in self.grid],
                 "random": {r.key: r.spec for r in self.random}, "samples": self.samples, "seed": self.seed,
                 "metrics": {m.name: m.spec.split("=", 1)[1] for m in self.metrics}, "series": list(self.series),
-                "gyro_sim_version": __version__}
+                "marks": list(self.mark_values), "gyro_sim_version": __version__}
 
 
 def _scene_for(data: dict, fixed: dict, values: dict, where: str, name: str):
@@ -185,7 +214,7 @@ def _load_scene_ref(ref, base: Optional[Path]) -> tuple:
 
 
 _SWEEP_KEYS = {"name", "description", "scene", "set", "vary", "random", "samples", "seed", "metrics", "series",
-               "series_points"}
+               "series_points", "marks"}
 
 
 def spec_from_dict(d: dict, where: str = "", base: Optional[Path] = None) -> SweepSpec:
@@ -223,7 +252,7 @@ def spec_from_dict(d: dict, where: str = "", base: Optional[Path] = None) -> Swe
                          set={k: _parse_value(v) for k, v in mapping("set").items()}, grid=grid, random=rnd,
                          samples=d.get("samples"), seed=int(d.get("seed", 0) or 0), metrics=metrics,
                          series=list(series), series_points=int(d.get("series_points", 1000)),
-                         description=str(d.get("description", "") or ""))
+                         description=str(d.get("description", "") or ""), marks=list(d.get("marks") or []))
         return spec.check()
     except SweepError as e:
         raise SweepError(f"invalid sweep {where}: {e}" if where else str(e)) from None

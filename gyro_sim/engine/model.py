@@ -123,6 +123,31 @@ def kinetic_energy(J: np.ndarray, omega_b: np.ndarray) -> np.ndarray:
     return 0.5 * np.einsum("ni,i,ni->n", omega_b, J, omega_b)
 
 
+def system_energy(scene: Scene, omega_b: np.ndarray, effects: dict) -> np.ndarray:
+    """Mechanical energy (J) of the rotor with its internal bodies, per sample (``RunResult.energy``).
+
+    Without effects ½ Ω_b·J Ω_b (:func:`kinetic_energy`). With a flywheel the gyrostat's, body and wheel (J with
+    the wheel locked; :func:`gyro_sim.physics.flywheel.wheel_energy`, ``effects["flywheel_speed"]``); with a
+    damper the body's, the mass's ½ m|v + Ω × r|² and the spring's ½ c|u|² (:func:`gyro_sim.physics.klt.damper_energy`,
+    ``effects["damper_offset"]``, ``["damper_velocity"]``). ``omega_b``: (n, 3) rad/s, body frame; ``effects``:
+    the effects' outputs of the same rows (:meth:`Simulator.effect_outputs`). The electrodynamic torque, the
+    unbalance, gas drag and the wheel's motor do work on the system; the damper's friction takes it."""
+    J = scene.inertia
+    fly, damper = scene.effects.flywheel, scene.effects.damper
+    if damper is not None and "damper_offset" in effects:
+        from gyro_sim.physics.klt import damper_energy
+
+        E = damper_energy(omega_b, list(J), damper.mass, damper.radius, damper.stiffness, effects["damper_offset"],
+                          effects["damper_velocity"])
+    else:
+        E = kinetic_energy(J, omega_b)
+    if fly is not None and "flywheel_speed" in effects:
+        from gyro_sim.physics.flywheel import wheel_energy
+
+        E = E + wheel_energy(omega_b, fly.inertia, fly.axis, effects["flywheel_speed"])
+    return E
+
+
 def output_times(scene: Scene, T: float, period: Optional[float] = None) -> tuple[np.ndarray, np.ndarray]:
     """(output instants, tick instants), s, sorted, of a run of ``scene`` over ``T`` s: the scene's output grid with
     a tick every ``period`` s (None: no ticks) merged in (a tick is exact: a sample within round-off is it). The

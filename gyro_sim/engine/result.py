@@ -35,7 +35,9 @@ class RunResult:
     q: np.ndarray  # (n,4) quaternion (w,x,y,z) body → case (NaN without attitude)
     omega_b: np.ndarray  # (n,3) rad/s, body frame (case frame without attitude)
     torque: np.ndarray  # (n,3) N·m, case frame (electrodynamic)
-    energy: np.ndarray  # (n,) J, rotational kinetic energy
+    # (n,) J, mechanical energy of the rotor and its internal bodies: ½ Ω·J Ω, plus a flywheel's and a damper mass's
+    # kinetic energy and the damper spring's (gyro_sim.engine.model.system_energy)
+    energy: np.ndarray
     stator_names: list[str]
     current: np.ndarray  # (n,k) A
     field_rate: np.ndarray  # (n,k) rad/s (signed)
@@ -171,12 +173,12 @@ INSTALL_DATA = "pip install 'gyro_sim[data]'"
 #: the time series of a RunResult: attribute → (unit, frame, description). The frame of omega_b, spin_rate and
 #: modes is the case frame in a run without attitude (:func:`_frame`).
 SERIES = {
-    "L": ("N m s", "case", "angular momentum L"),
+    "L": ("N m s", "case", "kinetic moment (angular momentum) L"),
     "q": ("1", "body to case", "attitude quaternion (w, x, y, z), body to case"),
     "omega_b": ("rad/s", "body", "angular velocity of the rotor"),
     "euler": ("rad", "L-frame", "Euler angles psi, theta, phi of the body in the L-frame"),
     "torque": ("N m", "case", "electrodynamic torque on the rotor"),
-    "energy": ("J", "", "rotational kinetic energy"),
+    "energy": ("J", "", "mechanical energy of the rotor with its internal bodies (flywheel, damper mass and spring)"),
     "spin_rate": ("rad/s", "body", "spin rate about the polar axis x3 (|Omega| without attitude)"),
     "current": ("A", "", "stator current amplitude"),
     "field_rate": ("rad/s", "", "signed rotation rate of the stator's field"),

@@ -11,7 +11,8 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
-from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times
+from gyro_sim.engine.model import (AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times,
+                                   system_energy)
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
@@ -494,8 +495,8 @@ class Runner:
         elif self.sim.eff[effects.ON]:
             t = t_rows
             omega_b = self.sim.body_rates(t, self.out_y[rows])
-            energy = kinetic_energy(self.sim.J, omega_b)  # the rigid body's own
             extra = self.sim.effect_outputs(t, self.out_y[rows])
+            energy = system_energy(self.scene, omega_b, extra)  # the body's and its internal bodies'
         else:
             _, omega_b = body_rates(self.sim.J, L, q)
             energy = kinetic_energy(self.sim.J, omega_b)

@@ -23,14 +23,14 @@ from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.model import (_TABLEAU, AVERAGED_ERROR, DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN,  # noqa: F401
                                    FROZEN_FLOW_COST, LAWS_WITHOUT_ATTITUDE, _case_flag, _initial_attitude, _tableau,
                                    body_rates, controller_period, integrates_attitude, kinetic_energy, lawson8_cost,
-                                   output_times, stator_triad)
+                                   output_times, stator_triad, system_energy)
 from gyro_sim.engine.result import RunResult, error_summary  # noqa: F401
 from gyro_sim.engine.runner import Runner
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.scenes.scene import Scene
 
 __all__ = ["Simulator", "RunResult", "Runner", "run", "drive", "stator_triad", "integrates_attitude",
-           "controller_period", "output_times", "kinetic_energy", "body_rates", "error_summary"]
+           "controller_period", "output_times", "kinetic_energy", "system_energy", "body_rates", "error_summary"]
 
 
 def run(scene: Scene, duration: Optional[float] = None, on_samples=None, attitude: Optional[bool] = None,

@@ -18,7 +18,7 @@ from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, ST
                                       field_rates, is_legacy, mode_plan, spin_reach, step_plan, truncated_model)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
 from gyro_sim.scenes.limits import command_problem, stator_limits
-from gyro_sim.scenes.scene import Scene
+from gyro_sim.scenes.scene import Scene, check_valid
 from gyro_sim.scenes.tolerance import has_symmetry_axis
 
 
@@ -40,6 +40,7 @@ class Simulator:
 
     def __init__(self, scene: Scene, attitude: Optional[bool] = None, horizon: Optional[float] = None,
                  quiet: bool = False, warn_plan: bool = True):
+        check_valid(scene)  # (a copy made by model_copy(update=...) is not validated: refused here in one line)
         self.scene = scene
         self.quiet = quiet  # no accuracy warnings (a shadow run: gyro_sim.accuracy.ErrorControl)
         # the step is the plan's divided by step_div (the run's error control changes it at its checks); a shadow
@@ -165,7 +166,7 @@ class Simulator:
     # --- named views of the state -------------------------------------------------------------
     @property
     def L(self) -> np.ndarray:
-        """Angular momentum L now, (3,) N·m·s, case frame (a copy of y[0:3]: the state moves on)."""
+        """Kinetic moment (angular momentum) L now, (3,) N·m·s, case frame (a copy of y[0:3]: the state moves on)."""
         return self.y[0:3].copy()
 
     @property

@@ -17,7 +17,7 @@ from gyro_sim.io.messages import (
     TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS,
 )
 
-__all__ = ["BagData", "read_bag", "bag_info", "BagNotClosedError", "BagDamagedError"]
+__all__ = ["BagData", "bag_effects", "read_bag", "bag_info", "BagNotClosedError", "BagDamagedError"]
 
 
 @dataclass
@@ -54,6 +54,19 @@ class BagData:
 
     def __len__(self) -> int:
         return len(self.t)
+
+
+def bag_effects(data: BagData) -> dict:
+    """RunResult.effects of the /gyro/effects channels a bag holds (flywheel, damper)."""
+    effects = {}
+    if "flywheel" in data.effects:
+        effects["flywheel_angle"] = data.effects["flywheel"][:, 0].copy()
+        effects["flywheel_speed"] = data.effects["flywheel"][:, 1].copy()
+    if all(f"damper_{a}" in data.effects for a in "xyz"):
+        effects["damper_offset"] = np.stack([data.effects[f"damper_{a}"][:, 0] for a in "xyz"], axis=1)
+        effects["damper_velocity"] = np.stack([data.effects[f"damper_{a}"][:, 1] for a in "xyz"], axis=1)
+    return effects
+
 
 
 def _custom_data(reader, path: Path) -> dict:

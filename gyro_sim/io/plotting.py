@@ -5,17 +5,23 @@ backend left as it is, never a window); saved as PNG when given a path.
 
 0. events: switching instants (a field reverses or a stator turns on/off) and command changes (``result.commands``);
 1. rotor rate in rev/s: spin Ω_b3 (about the polar axis x3) and the magnitude |Ω| dashed;
-2. nutation angle θ in degrees (a run without attitude, ``result.attitude`` False, has none: the panel
-   says so and the spin panel shows |Ω| alone);
-3. kinetic moment L in N·m·s, case frame (when the result has ``L``);
-4. stator current amplitudes in A, one step line per stator, each in its own style;
-5. field rate ν/2π in Hz (signed: the direction of rotation) and 6. slip (ν − Ω·u)/2π in Hz (field rate minus
+2. nutation angle θ in degrees, on a log axis where it spans more than a factor 30 (the last 0.01° of a
+   nutation damping stays visible) with the controller's dead band drawn (a run without attitude,
+   ``result.attitude`` False, has none: the panel says so and the spin panel shows |Ω| alone);
+3. kinetic moment (angular momentum) |L| and 4. its direction L/|L| (case frame components), when the
+   result has ``L``;
+5. the electrodynamic torque on the rotor, |N| and its case-frame components (when the result has ``torque``);
+6. stator current amplitudes in A, one step line per stator, each in its own style;
+7. field rate ν/2π in Hz (signed: the direction of rotation) and 8. slip (ν − Ω·u)/2π in Hz (field rate minus
    the rotor's rate about the stator axis u) of each stator while it carries current (when the result has
    ``field_rate``).
 
-Command changes are also dashed vertical lines across the panels.
+Command changes are also dashed vertical lines across the panels. L and N are shown in SI units with a
+prefix (mN·m·s, µN·m) chosen from their size; no axis carries an offset or a ×10ⁿ label.
 
-Long runs are thinned to at most ``MAX_POINTS`` points per line by keeping each
+A series that reverses faster than the plot can resolve (a field rate, slip or torque under switching) is drawn as
+its envelope: the minimum and maximum within each of ``ENVELOPE_BINS`` time bins, filled (not an aliased solid
+band of line segments). Other long lines are thinned to at most ``MAX_POINTS`` points per line by keeping each
 bucket's minimum and maximum, so peaks and envelopes survive the thinning.
 """
 from __future__ import annotations
@@ -28,9 +34,39 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["plot_run", "decimate_minmax", "slip", "command_events", "CommandEvents", "save_png", "new_figure",
-           "MAX_POINTS"]
+           "si_scale", "plain_ticks", "MAX_POINTS", "ENVELOPE_BINS", "L_NAME"]
 
 MAX_POINTS = 5000
+#: time bins of an envelope (about the plot's width in pixels at 100 dpi)
+ENVELOPE_BINS = 800
+#: a series with more reversals than this is drawn as its envelope (:func:`_draw_series`)
+ENVELOPE_REVERSALS = 20
+#: the one name of L in plots, tables and documents
+L_NAME = "kinetic moment (angular momentum)"
+_PREFIXES = {-12: "p", -9: "n", -6: "µ", -3: "m", 0: "", 3: "k", 6: "M", 9: "G"}
+
+
+def si_scale(values, unit: str) -> tuple[float, str]:
+    """(factor, unit with an SI prefix) so that ``values * factor`` lies in [1, 1000) at its largest magnitude:
+    ``si_scale([2e-6], "N·m") == (1e6, "µN·m")``. All-zero or non-finite values: (1, unit)."""
+    v = np.asarray(values, dtype=float)
+    v = np.abs(v[np.isfinite(v)])
+    top = float(v.max()) if v.size else 0.0
+    if top == 0.0:
+        return 1.0, unit
+    e = int(min(9, max(-12, 3 * math.floor(math.log10(top) / 3.0))))
+    return 10.0 ** -e, _PREFIXES[e] + unit
+
+
+def plain_ticks(ax) -> None:
+    """No offset ("+2.864") and no ×10ⁿ label on the axes' linear scales: every tick label is its own value."""
+    from matplotlib.ticker import ScalarFormatter
+
+    for axis in (ax.xaxis, ax.yaxis):
+        if isinstance(axis.get_major_formatter(), ScalarFormatter):
+            fmt = ScalarFormatter(useOffset=False)
+            fmt.set_powerlimits((-6, 9))  # (with units scaled by si_scale the values are 0.001 .. 1000)
+            axis.set_major_formatter(fmt)
 
 
 def decimate_minmax(t, y, max_points: int = MAX_POINTS):
@@ -260,20 +296,96 @@ def _panel_spin(ax, ts, omega, attitude):
     _legend(ax)
 
 
-def _panel_theta(ax, ts, theta_deg, attitude):
-    if attitude:
-        ax.plot(*decimate_minmax(ts, theta_deg), color="C2")
-    else:
+def _panel_theta(ax, ts, theta_deg, attitude, dead_band_deg=None):
+    """θ (deg); a log axis where θ spans more than a factor 30 (θ → 0 under a nutation control), with the dead
+    band of the controller (deg) as a dotted line."""
+    if not attitude:
         ax.text(0.5, 0.5, "attitude not integrated (output.attitude: false)", ha="center", va="center",
                 transform=ax.transAxes)
-    ax.set_ylabel("nutation θ (deg)\npolar axis x3 vs L")
+        ax.set_ylabel("nutation θ (deg)\nx3 vs L", fontsize=9)
+        return
+    pos = theta_deg[np.isfinite(theta_deg) & (theta_deg > 0.0)]
+    log = pos.size > 0 and float(pos.max()) > 30.0 * float(pos.min())
+    if log:
+        floor = max(float(pos.min()), float(pos.max()) * 1e-9)
+        ax.set_yscale("log")
+        ax.plot(*decimate_minmax(ts, np.maximum(theta_deg, floor)), color="C2", label="θ")
+    else:
+        ax.plot(*decimate_minmax(ts, theta_deg), color="C2", label="θ")
+    if dead_band_deg is not None and dead_band_deg > 0.0 and (log or dead_band_deg >= 0.5 * float(
+            np.nanmin(theta_deg) if np.isfinite(theta_deg).any() else 0.0)):
+        ax.axhline(dead_band_deg, color="0.4", ls=":", lw=1.2, gid="dead_band",
+                   label=f"dead band {dead_band_deg:.3g}°\n(control off below)")
+        _legend(ax)
+    ax.set_ylabel("nutation θ (deg)\nx3 vs L" + (", log" if log else ""), fontsize=9)
 
 
 def _panel_L(ax, ts, L):
+    """|L| in N·m·s with an SI prefix."""
+    mag = np.linalg.norm(L, axis=1)
+    f, unit = si_scale(mag, "N·m·s")
+    ax.plot(*decimate_minmax(ts, mag * f), color="C0", label="|L|")
+    ax.set_ylabel(f"{L_NAME.replace(' (', chr(10) + '(')}\n|L| ({unit})", fontsize=8)
+
+
+def _panel_L_direction(ax, ts, L):
+    """The direction of L: the case-frame components of L/|L| (NaN where L = 0)."""
+    mag = np.linalg.norm(L, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.where(mag[:, None] > 0.0, L / mag[:, None], np.nan)
     for j in range(3):
-        ax.plot(*decimate_minmax(ts, L[:, j]), **_stator_style(j), label=f"L along z{j + 1}")  # zeros stay apart
-    ax.set_ylabel("kinetic moment L\ncase frame (N·m·s)")
+        ax.plot(*decimate_minmax(ts, u[:, j]), **_stator_style(j), label=f"along z{j + 1}")  # zeros stay apart
+    ax.set_ylim(-1.08, 1.08)
+    ax.set_ylabel("direction of L\nL/|L|, case frame", fontsize=9)
     _legend(ax)
+
+
+def _panel_torque(ax, ts, N):
+    """The electrodynamic torque on the rotor: |N| and its case-frame components, SI prefix."""
+    mag = np.linalg.norm(N, axis=1)
+    f, unit = si_scale(mag, "N·m")
+    for j in range(3):
+        _draw_series(ax, ts, N[:, j] * f, steps=False, **_stator_style(j), label=f"N along z{j + 1}")
+    _draw_series(ax, ts, mag * f, steps=False, color="k", lw=1.0, label="|N|")
+    ax.axhline(0.0, color="0.5", lw=0.6)
+    ax.set_ylabel(f"torque on rotor\ncase frame ({unit})", fontsize=9)
+    _legend(ax)
+
+
+def _reversals(y) -> int:
+    """How often the series turns (the sign of its change flips), NaN and flat stretches left out."""
+    d = np.diff(np.asarray(y, dtype=float))
+    d = d[np.isfinite(d) & (d != 0.0)]
+    return int(np.count_nonzero(np.diff(np.sign(d)))) if d.size > 1 else 0
+
+
+def _envelope(ts, y, bins: int = ENVELOPE_BINS):
+    """(bin edges (bins + 1,), min (bins,), max (bins,)) of ``y`` over equal time bins (NaN where a bin is empty
+    or all NaN)."""
+    edges = np.linspace(float(ts[0]), float(ts[-1]), bins + 1)
+    k = np.clip(np.searchsorted(edges, ts, side="right") - 1, 0, bins - 1)
+    lo, hi = np.full(bins, np.inf), np.full(bins, -np.inf)
+    ok = np.isfinite(y)
+    np.minimum.at(lo, k[ok], y[ok])
+    np.maximum.at(hi, k[ok], y[ok])
+    lo[~np.isfinite(lo)], hi[~np.isfinite(hi)] = np.nan, np.nan
+    return edges, lo, hi
+
+
+def _draw_series(ax, ts, y, steps: bool = True, **style):
+    """A line (a step line where ``steps``), or where it reverses more than ENVELOPE_REVERSALS times (switching
+    faster than the plot resolves) its envelope: min..max per time bin, filled, with its edges (gid "envelope")."""
+    if ts.size > 2 and _reversals(y) > ENVELOPE_REVERSALS:
+        edges, lo, hi = _envelope(ts, y)
+        color = style.get("color")
+        label = style.get("label")
+        x = np.repeat(edges, 2)[1:-1]
+        ax.fill_between(x, np.repeat(lo, 2), np.repeat(hi, 2), color=color, alpha=0.25, lw=0, gid="envelope",
+                        label=f"{label} (min–max per time bin)" if label else None)
+        for edge in (lo, hi):
+            ax.plot(x, np.repeat(edge, 2), color=color, lw=0.6, gid="envelope_edge")
+        return
+    ax.plot(*decimate_minmax(ts, y), **({"drawstyle": "steps-post"} if steps else {}), **style)
 
 
 def _label(names, j):
@@ -291,13 +403,13 @@ def _panel_current(ax, ts, current, names):
 
 
 def _panel_per_stator(ax, ts, values, names, ylabel, empty):
-    """One step line per stator where ``values`` (n, k) is not all NaN; ``empty`` said when none is."""
+    """One step line per stator where ``values`` (n, k) is not all NaN (its envelope under fast switching:
+    :func:`_draw_series`); ``empty`` said when none is."""
     drawn = 0
     for j in range(values.shape[1]):
         if np.all(np.isnan(values[:, j])):
             continue
-        ax.plot(*decimate_minmax(ts, values[:, j]), drawstyle="steps-post", **_stator_style(j),
-                label=_label(names, j))
+        _draw_series(ax, ts, values[:, j], **_stator_style(j), label=_label(names, j))
         drawn += 1
     if drawn:
         ax.axhline(0.0, color="0.5", lw=0.6)
@@ -349,17 +461,21 @@ def _event_handles(ev: CommandEvents):
 def plot_run(result, path=None):
     """A figure summarising ``result`` (a ``gyro_sim.simulate.RunResult`` or a bag's view of one).
 
-    Panels on one time axis: rotor rate (rev/s: spin Ω₃ about the polar axis x3, |Ω|); nutation θ (deg);
-    kinetic moment L (N·m·s, case frame; when ``result.L`` is given); stator current amplitudes (A, one
+    Panels on one time axis: rotor rate (rev/s: spin Ω₃ about the polar axis x3, |Ω|); nutation θ (deg; log
+    scale where it spans more than a factor 30, with the controller's dead band); kinetic moment (angular
+    momentum) |L| and the direction L/|L| (case frame; when ``result.L`` is given); the torque on the rotor
+    (|N| and case-frame components; when ``result.torque`` is given); stator current amplitudes (A, one
     step line per stator, each in its own style so coinciding traces stay apart); field rate ν/2π (Hz,
     signed: the sign is the field's direction of rotation) and slip (ν − Ω·u)/2π (Hz, field rate minus the
     rotor's rate about the stator axis u, :func:`slip`) of each stator while it carries current. Command
     changes and switching instants (:func:`command_events`, from ``result.commands``) are marked on every
-    panel. Lines longer than ``MAX_POINTS`` are thinned with :func:`decimate_minmax`.
+    panel. A series reversing faster than the plot resolves is drawn as its envelope (min..max per time bin);
+    lines longer than ``MAX_POINTS`` are thinned with :func:`decimate_minmax`. No axis has an offset label.
 
     Args:
         result: the run: ``t`` (s), ``omega_b`` (rad/s, body frame), ``q``, ``euler`` (rad), ``current``
-            (A), ``stator_names``, optionally ``L``, ``field_rate`` (rad/s), ``commands``, ``scene``.
+            (A), ``stator_names``, optionally ``L`` (N·m·s), ``torque`` (N·m), ``field_rate`` (rad/s),
+            ``commands``, ``scene``.
         path: if given, the figure is also written there as PNG (atomically; parent folders made).
 
     Returns:
@@ -375,20 +491,26 @@ def plot_run(result, path=None):
     scale, unit = _time_axis(float(t[-1] - t[0]) if n else 0.0)
     ts = t / scale
     L = getattr(result, "L", None)
+    N = getattr(result, "torque", None)
     rate = getattr(result, "field_rate", None)
     s = slip(result)
     ev = command_events(result)
 
-    kinds = ["events", "spin", "theta"] + (["L"] if L is not None else []) + ["current"] \
+    kinds = ["events", "spin", "theta"] + (["L", "Ldir"] if L is not None else []) \
+        + (["torque"] if N is not None else []) + ["current"] \
         + (["rate"] if rate is not None else []) + (["slip"] if rate is not None else [])
-    fig = new_figure((12.5, 1.85 * (len(kinds) - 1) + 1.4))
+    fig = new_figure((12.5, 1.6 * (len(kinds) - 1) + 1.4))
     axes = fig.subplots(len(kinds), 1, sharex=True, height_ratios=[0.22] + [1.0] * (len(kinds) - 1))
     ax = dict(zip(kinds, axes))
     _panel_events(ax["events"], ev, scale)
     _panel_spin(ax["spin"], ts, omega, attitude)
-    _panel_theta(ax["theta"], ts, theta_deg, attitude)
+    _panel_theta(ax["theta"], ts, theta_deg, attitude, _dead_band_deg(result))
     if L is not None:
-        _panel_L(ax["L"], ts, np.asarray(L, dtype=float).reshape(n, 3))
+        L = np.asarray(L, dtype=float).reshape(n, 3)
+        _panel_L(ax["L"], ts, L)
+        _panel_L_direction(ax["Ldir"], ts, L)
+    if N is not None:
+        _panel_torque(ax["torque"], ts, np.asarray(N, dtype=float).reshape(n, 3))
     _panel_current(ax["current"], ts, current, names)
     if rate is not None:
         nu = np.asarray(rate, dtype=float).reshape(n, -1) / (2.0 * math.pi)
@@ -403,11 +525,19 @@ def plot_run(result, path=None):
     axes[-1].set_xlabel(f"time ({unit})")
     for a in axes[1:]:
         a.grid(True, alpha=0.3)
+        plain_ticks(a)
     axes[0].grid(True, axis="x", alpha=0.3)
     fig.suptitle(_run_title(result))
     if path is not None:
         save_png(fig, path)
     return fig
+
+
+def _dead_band_deg(result):
+    """The ψ-switching controller's dead band (deg) of the result's scene, or None."""
+    ctl = getattr(getattr(result, "scene", None), "controller", None)
+    band = getattr(getattr(ctl, "params", None), "dead_band", None)
+    return math.degrees(float(band)) if isinstance(band, (int, float)) else None
 
 
 def _run_title(result) -> str:

@@ -42,7 +42,7 @@ import numpy as np
 # the names of before the split (issue 22), re-exported: `from gyro_sim.recording import X` keeps working
 from gyro_sim.io.bag_format import _PREFIX, _TYPESTORE, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, _typestore  # noqa: F401
 from gyro_sim.io.bag_reader import (  # noqa: F401
-    _THINNED, BagData, BagNotClosedError, _custom_data, _ns, _refuse_not_closed, bag_info, read_bag,
+    _THINNED, BagData, BagNotClosedError, bag_effects, _custom_data, _ns, _refuse_not_closed, bag_info, read_bag,
 )
 from gyro_sim.io.bag_writer import (  # noqa: F401
     CHUNK_SPAN, CHUNK_WALL, MIN_FREE_BYTES, RESERVE_BYTES, RESERVE_NAME, RESERVE_PER_CHUNK, BagRecorder, RecordingError,
@@ -198,7 +198,7 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
     :data:`STREAM_BUFFER_ROWS` output rows, the bag's open chunk is bounded (:data:`CHUNK_SPAN`,
     :data:`CHUNK_WALL`), and the returned RunResult keeps its rows in memory up to ``keep_bytes``; beyond, it
     reads them back from the bag when first used (without what bags do not hold in RunResult's form: ``modes``
-    then has no columns and ``effects`` is empty; read_bag gives the /gyro/effects channels) and
+    then has no columns; ``effects`` holds the /gyro/effects channels) and
     :meth:`RunResult.preview` gives a decimated copy.
 
     The write target is checked before the run (:func:`check_write_target`). Ctrl-C, SIGTERM or SIGHUP close
@@ -207,7 +207,7 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
     with what fit and raises :class:`RecordingError`. ``on_samples(dict)`` is called with each chunk of rows.
     A scene with ``fidelity`` other than ``full`` is run in memory and recorded when it ends. ``force``: run a plan
     beyond the step budget (:func:`gyro_sim.engine.simulate.run`; refused before the bag is made without it)."""
-    from gyro_sim.engine.simulate import Runner, drive, kinetic_energy
+    from gyro_sim.engine.simulate import Runner, drive, system_energy
     from gyro_sim.engine.simulate import RunResult as _RunResult
 
     path = Path(path)
@@ -252,8 +252,6 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
     if kept.rows is not None:
         return _RunResult(**known, **kept.rows.series(), commands=kept.commands)
     preview = _RunResult(**known, **kept.preview.series(kept.last))
-    J = r.sim.J
-
     def load() -> dict:
         b = read_bag(path)
         cmds = []
@@ -262,8 +260,8 @@ def record_run(scene, path: Union[str, os.PathLike], duration: Optional[float] =
             cmds.append((t, [b.stator_names[k] for k in ks], [None if np.isnan(c[k]) else float(c[k]) for k in ks],
                          [None if np.isnan(v[k]) else float(v[k]) for k in ks]))
         return {"t": b.t, "L": b.L, "q": b.q, "omega_b": b.omega_b, "torque": b.torque,
-                "energy": kinetic_energy(J, b.omega_b), "current": b.current, "field_rate": b.rate,
+                "energy": system_energy(scene, b.omega_b, bag_effects(b)), "current": b.current, "field_rate": b.rate,
                 "field_phase": b.phase, "modes": np.zeros((b.t.size, 0)),
-                "effects": {}, "commands": cmds, "_euler": b.euler}
+                "effects": bag_effects(b), "commands": cmds, "_euler": b.euler}
 
     return _RunResult.lazy(load, preview, **known)

@@ -101,18 +101,6 @@ def parse_error_estimate(text) -> "Optional[ErrorEstimate]":
         return None
 
 
-def _bag_effects(data: "BagData") -> dict:
-    """RunResult.effects of the /gyro/effects channels a bag holds (flywheel, damper)."""
-    effects = {}
-    if "flywheel" in data.effects:
-        effects["flywheel_angle"] = data.effects["flywheel"][:, 0].copy()
-        effects["flywheel_speed"] = data.effects["flywheel"][:, 1].copy()
-    if all(f"damper_{a}" in data.effects for a in "xyz"):
-        effects["damper_offset"] = np.stack([data.effects[f"damper_{a}"][:, 0] for a in "xyz"], axis=1)
-        effects["damper_velocity"] = np.stack([data.effects[f"damper_{a}"][:, 1] for a in "xyz"], axis=1)
-    return effects
-
-
 def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Optional[float] = None,
              control_period: Optional[float] = None) -> "RunResult":
     """A :class:`~gyro_sim.simulate.RunResult` of a gyro_sim bag: recorded in-process (``gyro-sim run --record``,
@@ -123,13 +111,15 @@ def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Opti
     ``scene``: a Scene, a built-in name or a path (default: the scene text in the bag). The sample times are the
     simulation's own grid (the Runner's for ``duration`` and ``control_period`` as the run had them; defaults from
     the bag's custom data, else the scene's): the same bits as the in-process run, not the ns stamps rounded.
-    ``energy`` is ½ Ω_b·J Ω_b of the scene's inertia; ``commands`` are those the bag holds (the controller's, the
-    scene's schedule and the watchdog's zeroing as applied: not the scene's initial settings); ``modes`` (not
-    recorded) has no columns; ``wall_time``, ``steps`` and the error estimate come from the bag's custom data
-    (``compile_time`` too where the recorder wrote it). Bags always hold the attitude (``attitude`` True)."""
+    ``energy`` is the rotor's with its internal bodies (:func:`gyro_sim.engine.model.system_energy`); ``commands``
+    are those the bag holds (the controller's, the scene's schedule and the watchdog's zeroing as applied: not the
+    scene's initial settings); ``modes`` (not recorded) has no columns; ``wall_time``, ``steps`` and the error
+    estimate come from the bag's custom data (``compile_time`` too where the recorder wrote it). Bags always hold
+    the attitude (``attitude`` True)."""
+    from gyro_sim.io.bag_reader import bag_effects
     from gyro_sim.io.recording import BagData
     from gyro_sim.io.recording import read_bag as read_bag_data
-    from gyro_sim.engine.simulate import RunResult, kinetic_energy
+    from gyro_sim.engine.simulate import RunResult, system_energy
 
     data = bag if isinstance(bag, BagData) else read_bag_data(bag)
     scene = _bag_scene(data, scene)
@@ -141,12 +131,12 @@ def read_bag(bag: Union[str, os.PathLike, "BagData"], scene=None, duration: Opti
     est = parse_error_estimate(custom.get("gyro_sim.error_estimate"))
     end = str(custom.get("gyro_sim.end") or "")  # (a run whose state broke: "failed: <what> at t = … s")
     return RunResult(scene=scene, t=t, L=data.L, q=data.q, omega_b=data.omega_b, torque=data.torque,
-                     energy=kinetic_energy(scene.inertia, data.omega_b), stator_names=list(data.stator_names),
+                     energy=system_energy(scene, data.omega_b, bag_effects(data)), stator_names=list(data.stator_names),
                      current=data.current, field_rate=data.rate, field_phase=data.phase, modes=np.zeros((t.size, 0)),
                      wall_time=_custom_float(custom, "gyro_sim.wall_time") or 0.0,
                      compile_time=_custom_float(custom, "gyro_sim.compile_time") or 0.0,
                      steps=int(_custom_float(custom, "gyro_sim.steps") or 0), commands=bag_commands(data, grid),
-                     effects=_bag_effects(data), attitude=True, error_estimate=est,
+                     effects=bag_effects(data), attitude=True, error_estimate=est,
                      failure=end if end.startswith("failed:") else None)
 
 

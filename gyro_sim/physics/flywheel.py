@@ -61,7 +61,7 @@ __all__ = [
     "cayley_klein", "quat_from_cayley_klein", "euler_zxz", "quat_from_euler_zxz",
     "axis_angles", "axis_from_angles", "companion_axis", "turn_ratio", "reduced_inertia",
     "companion_angles", "wheel_angles_from_companion", "ck_coefficients", "ck_coefficients_23_printed",
-    "gyrostat_body_rate", "forward_attitude", "turn_about_axis",
+    "gyrostat_body_rate", "wheel_energy", "forward_attitude", "turn_about_axis",
     "smolnikov_wheel_angles", "smolnikov_wheel_turn",
     "trapezoid_profile", "profile_angle", "FlywheelPlan", "plan_reorientation", "plan_scene",
 ]
@@ -229,6 +229,18 @@ def gyrostat_body_rate(J: Sequence[float], J_f: float, a: Sequence[float], wheel
                        L_b: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
     """Ω_b = J⁻¹(L_b − J_f Ω_f a) (rad/s, body frame) of the gyrostat [S] (1) (L_b in N·m·s, body)."""
     return (np.asarray(L_b, dtype=float) - float(J_f) * float(wheel_speed) * _unit(a, "axis")) / _inertia(J)
+
+
+def wheel_energy(omega_b: np.ndarray, J_f: float, a: Sequence[float], wheel_speed: np.ndarray) -> np.ndarray:
+    """Kinetic energy (J) the turning wheel adds to the locked body's ½ Ω·J Ω: J_f Ω_f (a·Ω) + ½ J_f Ω_f².
+
+    Ω = ``omega_b`` (rad/s, body frame, rows = samples), the wheel's axial moment J_f (kg·m²) on the body axis a
+    turning at Ω_f = ``wheel_speed`` (rad/s, one per row) relative to the body. J (with the wheel locked) holds
+    ½ J_f (a·Ω)²; the wheel's own spin about a is a·Ω + Ω_f. The motor driving the wheel does work, so the sum
+    is not conserved; with L = 0 it is ½ J_f Ω_f² (1 − J_f a·J⁻¹a)."""
+    w = np.atleast_2d(np.asarray(omega_b, dtype=float))
+    ws = np.asarray(wheel_speed, dtype=float)
+    return float(J_f) * ws * (w @ _unit(a, "axis")) + 0.5 * float(J_f) * ws * ws
 
 
 def forward_attitude(q0: Sequence[float], J: Sequence[float], J_f: float, a: Sequence[float],

@@ -35,9 +35,10 @@ from __future__ import annotations
 import math
 from typing import Annotated, Optional
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from gyro_ctl.numbers import Finite, real
+from gyro_ctl.strict_model import StrictModel
 
 __all__ = ["Effects", "Unbalance", "GasDrag", "Magnetizable", "Profile", "Flywheel", "Damper", "unit_vector"]
 
@@ -45,9 +46,7 @@ Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
 
-class _Strict(BaseModel):
-    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
-    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
+_Strict = StrictModel  # (unknown keys refused, immutable: gyro_ctl/strict_model.py)
 
 
 def unit_vector(a: list[float], key: str) -> list[float]:

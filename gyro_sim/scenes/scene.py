@@ -109,17 +109,18 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origin
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, StrictBool, ValidationError, field_validator, model_validator
 
 from gyro_ctl.config import ControllerConfig, unknown_stators
 from gyro_ctl.numbers import Finite, NonNegative, Positive, count, real
+from gyro_ctl.strict_model import StrictModel
 
 from gyro_sim.scenes.effect_config import Effects, unit_vector
 from gyro_sim.scenes.limits import check_scene_limits
 from gyro_sim.scenes.tolerance import DEFAULT_ATTITUDE, DEFAULT_PHASE, DEFAULT_RTOL
 from gyro_sim.scenes.scene_text import SceneError, clip, human_bytes, parse_scene_text, preview, read_scene_file
 
-__all__ = ["Scene", "SceneError", "load_scene", "builtin_scenes", "scene_from_dict", "config_dir",
+__all__ = ["Scene", "SceneError", "load_scene", "check_valid", "builtin_scenes", "scene_from_dict", "config_dir",
            "parse_scene_text", "result_size", "check_command_times", "max_result_bytes", "MAX_RESULT_BYTES"]
 __all__ += ["Rotor", "Conductor", "Stator", "FieldTerm", "Command", "Initial", "Output", "OutputWindow",  # sections
             "Integrator", "Accuracy"]
@@ -133,9 +134,7 @@ MAX_ERROR_LINE = 300  # characters of one listed error
 Vec3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
 
-class _Strict(BaseModel):
-    # (the docstring under each field is its description: meaning and SI unit, in the API reference and JSON schema)
-    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
+_Strict = StrictModel  # (unknown keys refused, immutable: gyro_ctl/strict_model.py)
 
 
 class Conductor(_Strict):
@@ -504,6 +503,26 @@ class Scene(_Strict):
     def stator_index(self, name: str) -> int:
         return [s.name for s in self.stators].index(name)
 
+    # --- changed copies -----------------------------------------------------------------
+    def replace(self, changes: Optional[dict] = None, /, **fields: Any) -> "Scene":
+        """A copy of the scene with some values changed, validated again (a scene is immutable).
+
+        ``changes`` maps dotted keys from the scene's top to values (list items by index), the keys of
+        ``gyro-sim run --set`` and of a sweep; ``fields`` sets top-level keys::
+
+            scene.replace({"stators.2.current": 0.5, "initial.theta": 0.1})
+            scene.replace(duration=5.0, controller=None)
+
+        Values are given as in a scene file (SI units: a list for a vector, a mapping for a section). An invalid
+        result raises :class:`SceneError` with one line per wrong key (the key, the value, what is allowed), as
+        loading a file does; a scheduled command after a shortened ``duration`` is dropped by the run as with
+        ``--duration``, not refused. ``source`` stays that of this scene (docs/scenes.md)."""
+        data = apply_overrides(self.model_dump(exclude={"source"}), {**(changes or {}), **fields})
+        where = self.source or ""
+        scene = scene_from_dict(data, where=where, default_name=self.name)
+        check_command_times(scene, self.duration, where=where)
+        return scene
+
 
 # --- the memory a run's result takes --------------------------------------------------------
 
@@ -683,10 +702,21 @@ def scene_from_dict(data: Any, where: str = "", default_name: str = "scene") -> 
         raise SceneError(_format_errors(err, where)) from None
 
 
+def check_valid(scene: Scene) -> None:
+    """SceneError (the one-line errors of a scene file) where ``scene`` does not validate: a copy made by pydantic's
+    ``model_copy(update=...)`` or ``model_construct``, which skip validation. Costs about 0.1 ms; a run calls it."""
+    try:
+        Scene.model_validate(scene.model_dump(warnings=False))
+    except ValidationError as err:
+        raise SceneError(_format_errors(err, scene.source or "")) from None
+
+
 def load_scene(name_or_path: Union[str, Path], overrides: Optional[dict] = None) -> Scene:
     """Load and validate a scene from a YAML file or a built-in scene name.
 
-    ``overrides`` maps dotted keys (``"initial.theta"``) to values applied before validation.
+    ``overrides`` maps dotted keys from the scene's top (``"initial.theta"``, ``"stators.2.current"``: list items
+    by index) to values applied before validation, as ``gyro-sim run --set`` does; :meth:`Scene.replace` makes the
+    same change to a scene already loaded (docs/scenes.md).
     """
     p = Path(name_or_path)
     try:
