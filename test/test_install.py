@@ -121,3 +121,47 @@ def test_pip_install_into_a_fresh_venv_then_run(tmp_path, extra):
                        timeout=600, cwd=tmp_path)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "compiling" not in r.stdout + r.stderr, r.stdout + r.stderr
+
+
+def lower_bounds() -> list:
+    """``name==version`` of each dependency's lower bound (pyproject.toml)."""
+    from packaging.requirements import Requirement
+
+    from test_packaging import pyproject
+
+    out = []
+    for r in map(Requirement, pyproject()["project"]["dependencies"]):
+        low = [s.version for s in r.specifier if s.operator == ">="]
+        assert low, f"{r}: no lower bound"
+        out.append(f"{r.name}=={low[0]}")
+    return out
+
+
+def test_the_kernel_build_asks_for_the_package_s_own_bounds():
+    sys.path.insert(0, str(ROOT / "build_support"))
+    try:
+        import out_of_tree
+    finally:
+        sys.path.pop(0)
+    from test_packaging import pyproject
+
+    deps = set(pyproject()["project"]["dependencies"])
+    assert set(out_of_tree.KERNEL_REQUIRES) <= deps, set(out_of_tree.KERNEL_REQUIRES) - deps
+
+
+@pytest.mark.slow
+def test_lower_bounds(tmp_path):
+    """The dependencies at their lower bounds (pyproject.toml), together in a fresh venv: the physics, recording and
+    results tests pass with them (this source tree on PYTHONPATH)."""
+    venv.create(tmp_path / "venv", with_pip=True)
+    py = tmp_path / "venv/bin/python"
+    r = subprocess.run([py, "-m", "pip", "install", "-q", *lower_bounds(), "pytest", "hypothesis", "mpmath",
+                        "mcap-ros2-support"], capture_output=True, text=True, env=build_env(), timeout=1800)
+    assert r.returncode == 0, r.stdout + r.stderr
+    tests = [str(ROOT / "test" / t) for t in ("test_closed_forms.py", "test_frozen_flow.py", "test_recording.py",
+                                               "test_results.py", "test_scene.py")]
+    r = subprocess.run([py, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", "not ros", *tests],
+                       capture_output=True, text=True, timeout=1800, cwd=tmp_path,
+                       env=build_env(PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "numba")))
+    print("\n  " + r.stdout.strip().splitlines()[-1])
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
