@@ -207,3 +207,12 @@ def test_physics_reference_is_in_the_repository():
         assert (ROOT / path).is_file(), path
         if func:
             assert re.search(rf"^def {func}\(", (ROOT / path).read_text(encoding="utf-8"), re.M), f"{path}::{func}"
+
+
+def test_the_readme_python_blocks_run(tmp_path, monkeypatch):
+    """Issue 33: the README's code examples are checked: each ```python block runs (in a temporary folder)."""
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(encoding="utf-8"), re.S)
+    assert blocks
+    monkeypatch.chdir(tmp_path)
+    for code in blocks:
+        exec(compile(code, "README.md", "exec"), {})
