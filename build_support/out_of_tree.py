@@ -22,7 +22,7 @@ TREE = ["setup.py", "setup.cfg", "pyproject.toml", "MANIFEST.in", "package.xml",
         "build_support", "gyro_sim", "gyro_ctl", "config", "launch", "resource", "scripts"]
 #: what the kernel compile of a wheel build imports (the bounds of pyproject.toml's dependencies): asked for by
 #: the wheel build alone, so an editable install (which compiles nothing) does not fetch them into its build env
-KERNEL_REQUIRES = ("numpy>=2.0", "scipy>=1.13", "numba>=0.60", "pyyaml>=6", "pydantic>=2.5")
+KERNEL_REQUIRES = ("numpy>=2.0", "scipy>=1.13.1", "numba>=0.60", "pyyaml>=6", "pydantic>=2.5")
 _SKIP = shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc", "*.egg-info")
 
 
