@@ -20,7 +20,8 @@ import numpy as np
 
 from gyro_sim import __version__
 from gyro_sim.apps.sweep_axes import SweepError
-from gyro_sim.apps.sweep_io import _flat_row, _journal_path, _read_journal, _row_from_flat, read_results, write_results
+from gyro_sim.apps.sweep_io import (Journal, _flat_row, _journal_path, _read_journal, _row_from_flat, read_results,
+                                  write_results)
 from gyro_sim.apps.sweep_metrics import _quantity, parse_metric
 from gyro_sim.apps.sweep_spec import SweepSpec, _scene_for
 from gyro_sim.scenes.scene import SceneError
@@ -56,12 +57,18 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
     """Run the variants ``items`` = [(run_id, values), ...] of a sweep ``payload`` (SweepSpec.payload)
     one after the other; returns one row per item: run_id, status ('ok' | 'invalid' | 'failed'),
     error, metrics {name: float}, series {quantity: [..]}, wall_time_run (s), cpu_time_run (s of this
-    thread's CPU), worker. Never raises for a bad variant or a failed run: the reason goes in ``error``."""
+    thread's CPU), sim_cpu (s of this thread's CPU in the run itself, ``gyro_sim.run``), worker. Never raises for a
+    bad variant or a failed run: the reason goes in ``error``. Each variant's scene is built (and validated) once,
+    here; the run is reduced to the requested metrics (and series) here: the row is all that leaves the worker."""
+    return list(chunk_rows(payload, items))
+
+
+def chunk_rows(payload: dict, items: Sequence[tuple]):
+    """:func:`run_chunk`'s rows one at a time, as each run ends (the metrics parsed, the worker named once)."""
     metrics = [parse_metric(m) for m in payload["metrics"]]
     series = payload.get("series") or []
     npts = int(payload.get("series_points", 1000))
     label = _worker_label()
-    rows = []
     for run_id, values in items:
         w0, c0 = time.perf_counter(), time.thread_time()
         row = {"run_id": run_id, "status": "ok", "error": None, "metrics": {}, "series": {}, "worker": label}
@@ -70,11 +77,13 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
                                payload.get("name", "scene"))
         except SceneError as e:
             row.update(status="invalid", error=str(e), wall_time_run=time.perf_counter() - w0,
-                       cpu_time_run=time.thread_time() - c0)
-            rows.append(row)
+                       cpu_time_run=time.thread_time() - c0, sim_cpu=0.0)
+            yield row
             continue
+        s0 = time.thread_time()
         try:
             res = _run_scene(scene) if any(m.needs_run for m in metrics) or series else None
+            row["sim_cpu"] = time.thread_time() - s0
             if res is not None:
                 # (q is NaN by design in a run without attitude: output.attitude false, isotropic rotor)
                 finite = np.isfinite(res.L).all(axis=1) & (np.isfinite(res.q).all(axis=1) | (not res.attitude))
@@ -92,11 +101,10 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
                 row["series"] = {"t": _decimate(res.t, npts), **{q: _decimate(_quantity(res, q), npts) for q in series}}
         except Exception as e:  # noqa: BLE001 - a failed run is a result
             msg = str(e) if isinstance(e, (FloatingPointError, RuntimeError)) and str(e) else f"{type(e).__name__}: {e}"
-            row.update(status="failed", error=msg, metrics={}, series={})
+            row.update(status="failed", error=msg, metrics={}, series={}, sim_cpu=time.thread_time() - s0)
         row["wall_time_run"] = time.perf_counter() - w0
         row["cpu_time_run"] = time.thread_time() - c0  # (this thread's CPU s: measure() compares it, not stored)
-        rows.append(row)
-    return rows
+        yield row
 
 
 def _noop(x):
@@ -128,10 +136,15 @@ class SweepResult:
         return self.n_run / self.wall if self.wall > 0 else math.nan
 
 
-class _Progress:
-    """Runs done / failed and the time left (tqdm on stderr)."""
+#: the progress bar's line (tqdm): runs done of all, failures, runs/s and the time left
+PROGRESS_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} runs{postfix} [{elapsed}, {rate_fmt}, ETA {remaining}]"
 
-    def __init__(self, total: int, initial: int, name: str, enabled: bool):
+
+class _Progress:
+    """Runs done / failed, runs/s and the time left (tqdm on stderr, :data:`PROGRESS_FORMAT`); ``stream``: another
+    file (tests)."""
+
+    def __init__(self, total: int, initial: int, name: str, enabled: bool, stream=None):
         self.failed = 0
         self.bar = None
         if enabled and total > initial:
@@ -139,15 +152,18 @@ class _Progress:
                 from tqdm import tqdm
             except ImportError:  # pragma: no cover - the sweep extra brings it
                 return
-            self.bar = tqdm(total=total, initial=initial, desc=f"sweep {name}", unit="run", file=sys.stderr,
-                            mininterval=0.2 if sys.stderr.isatty() else 5.0, dynamic_ncols=True, leave=True)
+            stream = stream or sys.stderr
+            tty = hasattr(stream, "isatty") and stream.isatty()
+            self.bar = tqdm(total=total, initial=initial, desc=f"sweep {name}", unit=" runs", file=stream,
+                            mininterval=0.2 if tty else 5.0, dynamic_ncols=True, leave=True,
+                            bar_format=PROGRESS_FORMAT, postfix="")
 
-    def update(self, failed: bool) -> None:
-        if failed:
-            self.failed += 1
-        if self.bar is not None:
-            self.bar.set_postfix_str(f"failed={self.failed}", refresh=False)
-            self.bar.update(1)
+    def update(self, rows: Sequence[dict]) -> None:
+        """Count a batch of finished rows (one refresh for all of them)."""
+        self.failed += sum(1 for r in rows if r["status"] != "ok")
+        if self.bar is not None and rows:
+            self.bar.set_postfix_str(f", {self.failed} failed" if self.failed else "", refresh=False)
+            self.bar.update(len(rows))
 
     def close(self) -> None:
         if self.bar is not None:
@@ -209,8 +225,8 @@ def _execute(payload: dict, items: list, client, batch, on_rows: Callable, worke
     ``batch`` variants per task, or tasks sized as they are sent (``"auto"``, :func:`gyro_sim.sweep_tasks.
     run_adaptive`; returns its sizer)."""
     if client is None:
-        for it in items:
-            on_rows(run_chunk(payload, [it]))
+        for row in chunk_rows(payload, items):
+            on_rows([row])
         return None
     from gyro_sim.apps.sweep_tasks import run_adaptive, run_fixed
 
@@ -243,45 +259,33 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
         if out.is_file():
             old, _ = read_results(out)
             for flat in old:
-                if flat.get("run_id") in by_id and flat.get("status") != "invalid":
+                if flat.get("run_id") in by_id:
                     done[flat["run_id"]] = _row_from_flat(spec, flat)
         for r in _read_journal(_journal_path(out)):
             if r.get("run_id") in by_id:
                 done[r["run_id"]] = r
-        if retry_failed:
-            done = {k: r for k, r in done.items() if r["status"] == "ok"}
+        # (invalid variants are validated again: a changed scene loader may accept them)
+        done = {k: r for k, r in done.items() if r["status"] == "ok" or (r["status"] == "failed" and not retry_failed)}
     elif out is not None:
         _journal_path(out).unlink(missing_ok=True)
     results: dict = dict(done)
-    # --- validate every variant before anything runs
-    todo = []
-    n_invalid = 0
-    for v in variants:
-        if v.run_id in done:
-            continue
-        try:
-            spec.scene_for(v.values)
-        except SceneError as e:
-            results[v.run_id] = {"run_id": v.run_id, "status": "invalid", "error": str(e), "metrics": {}, "series": {},
-                                 "wall_time_run": 0.0, "worker": ""}
-            n_invalid += 1
-            continue
-        todo.append(v)
-    res = SweepResult(spec, [], n_total=len(variants), n_skipped=len(done), n_invalid=n_invalid, out=out)
+    # each variant's scene is built (and validated) once, where it runs (run_chunk): an invalid one comes back as a
+    # row of status "invalid" with the loader's message, before any integration of its own
+    todo = [v for v in variants if v.run_id not in done]
+    res = SweepResult(spec, [], n_total=len(variants), n_skipped=len(done), out=out)
     bar = _Progress(len(variants), len(variants) - len(todo), spec.name, progress)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-    journal = open(_journal_path(out), "a", encoding="utf-8") if out is not None and todo else None
+    journal = Journal(_journal_path(out)) if out is not None and todo else None
 
     def on_rows(rows):
         for r in rows:
             r["gyro_sim_version"] = __version__
             results[r["run_id"]] = r
-            if journal is not None:
-                journal.write(json.dumps(r) + "\n")
-                journal.flush()
-            res.n_run += 1
-            bar.update(r["status"] != "ok")
+        if journal is not None:
+            journal.add(rows)
+        res.n_run += sum(1 for r in rows if r["status"] != "invalid")
+        bar.update(rows)
 
     client = cluster = None
     try:

@@ -24,15 +24,20 @@ import math
 import statistics
 from typing import Callable, Optional, Sequence
 
-__all__ = ["TASK_SECONDS", "TASKS_AHEAD", "WORKER_CONFIG", "TaskSizer", "worker_slots", "failed_rows",
+__all__ = ["TASK_SECONDS", "TASKS_AHEAD", "WORKER_THREADS_ENV", "WORKER_CONFIG", "TaskSizer", "worker_slots", "failed_rows",
            "run_fixed", "run_adaptive"]
 
 #: s of runs a task aims at: long against the 1.5–7 ms each task costs, short enough for an even finish
 TASK_SECONDS = 0.25
 #: tasks kept in flight per worker thread (one running, one queued: no thread waits for the next task)
 TASKS_AHEAD = 2
-#: the Dask settings of the local cluster's workers (dask.config keys)
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+#: the thread pools of a worker process, one thread each: a worker runs one variant at a time on one core, and a
+#: pool of threads per worker (numba's threading layer, OpenMP, BLAS) would have the workers fight over the cores
+WORKER_THREADS_ENV = {"NUMBA_NUM_THREADS": 1, "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
+#: the Dask settings of the local cluster's workers (dask.config keys; the environment is set before the worker
+#: process starts, so numba and BLAS read it at import)
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
+                 "distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536, **WORKER_THREADS_ENV}}
 #: run times (s) the sizer keeps (the median of the latest)
 _KEEP = 256
 
