@@ -15,7 +15,7 @@ import pytest
 
 import gyro_sim
 from gyro_sim import sweep as sw
-from gyro_sim.apps import sweep_exec  # (run_chunk and run_sweep live there: patch their names there)
+from gyro_sim.apps import sweep_exec, sweep_tasks  # (run_chunk and run_sweep live there: patch their names there)
 from gyro_sim.averaged import RotorK
 
 TINY = {"duration": 0.02, "output.rate": 500.0}
@@ -236,6 +236,88 @@ def test_parquet_table_holds_parameters_metrics_series_and_version(tmp_path):
     assert rows == [{k: r[k] for k in rows[0]} for r in res.rows]
 
 
+def test_a_variants_scene_is_built_once(monkeypatch):
+    """Each variant's scene is built and validated once per sweep, where it runs (it was built twice: validated by
+    the driver, then built again for the run); an invalid variant is still recorded with the loader's message."""
+    from gyro_sim.apps import sweep_spec
+
+    calls = []
+    real = sweep_spec._scene_for
+
+    def counting(*a, **k):
+        calls.append(a[2])
+        return real(*a, **k)
+
+    monkeypatch.setattr(sweep_spec, "_scene_for", counting)
+    monkeypatch.setattr(sweep_exec, "_scene_for", counting)
+    spec = tiny(vary={"controller.period": "0.001,0.002", "initial.theta": "0.2,3.5"},
+                random={"initial.psi": "uniform(0, 6.28)"}, samples=2)
+    res = sw.run_sweep(spec, workers=0, progress=False)
+    assert len(res.rows) == 8 and res.n_invalid == 4 and res.n_run == 4
+    assert sorted(map(str, calls)) == sorted(str(v.values) for v in spec.variants())  # one build per variant
+    assert all("initial.theta" in r["error"] for r in res.rows if r["status"] == "invalid")
+
+
+def test_journal_is_written_in_batches(tmp_path, monkeypatch):
+    """The journal takes a sweep's finished rows in batches (one write and flush per JOURNAL_SECONDS, and at the
+    end), not a line and a flush per run; a hard stop before the table is written still finds every finished run."""
+    from gyro_sim.apps import sweep_io
+
+    monkeypatch.setattr(sweep_io, "JOURNAL_SECONDS", 3600.0)
+    out = tmp_path / "j.parquet"
+    sizes = []
+    real = sw._run_scene
+
+    def watch(scene):
+        path = sw._journal_path(out)
+        sizes.append(path.stat().st_size if path.exists() else 0)
+        return real(scene)
+
+    def no_disk(*a, **k):
+        raise OSError("disk gone")
+
+    monkeypatch.setattr(sweep_exec, "_run_scene", watch)
+    monkeypatch.setattr(sweep_exec, "write_results", no_disk)
+    spec = tiny(vary={"controller.period": "0.001:0.006:6"})
+    with pytest.raises(OSError):
+        sw.run_sweep(spec, out=out, workers=0, progress=False)
+    assert sizes == [0] * 6  # nothing written while the runs went on
+    assert len(sw._read_journal(sw._journal_path(out))) == 6  # all of them at the end, in one write
+    j = sweep_io.Journal(tmp_path / "x.jsonl", seconds=0.0)
+    j.add([{"a": 1}, {"a": 2}])
+    j.add([{"a": 3}])
+    j.close()
+    assert j.writes == 2 and len(sw._read_journal(tmp_path / "x.jsonl")) == 3  # seconds=0: a write per batch
+
+
+def test_seeds_are_recorded_per_run(tmp_path):
+    """Each row holds the seed of its random draws (with its sample number they give its values again); a row
+    that draws nothing has none."""
+    out = tmp_path / "s.parquet"
+    spec = tiny(vary={"controller.period": "0.001,0.002"}, random={"initial.psi": "uniform(0, 6.28)"}, samples=2,
+                seed=41)
+    sw.run_sweep(spec, out=out, workers=0, progress=False)
+    rows, _ = sw.read_results(out)
+    assert [r["seed"] for r in rows] == [41] * 4 and [r["sample"] for r in rows] == [0, 1, 0, 1]
+    (rv,) = spec.random
+    assert all(r["initial.psi"] == rv.draw(r["seed"], r["sample"]) for r in rows)
+    grid = sw.run_sweep(tiny(), out=tmp_path / "g.parquet", workers=0, progress=False)
+    assert {r["seed"] for r in grid.rows} == {None}
+    with pytest.raises(sw.SweepError, match="reserved"):
+        sw.parse_metric("seed=final(spin)")
+
+
+def test_progress_bar_shows_runs_per_second_and_time_left():
+    import io
+
+    text = io.StringIO()
+    bar = sweep_exec._Progress(10, 2, "demo", True, stream=text)
+    bar.update([{"status": "ok"}, {"status": "failed"}])
+    bar.close()
+    line = text.getvalue().strip().splitlines()[-1]
+    assert "4/10 runs" in line and "1 failed" in line and "runs/s" in line and "ETA" in line, line
+
+
 def test_plots(tmp_path):
     one = sw.run_sweep(tiny(), workers=0, progress=False)
     two = sw.run_sweep(tiny(vary={"controller.period": "0.001,0.002,0.003", "initial.theta": "0.1,0.2,4.0"}),
@@ -410,6 +492,9 @@ def test_local_cluster_workers_run_without_the_profiler():
     try:
         on = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
         assert n == 1 and list(on.values()) == [False]
+        # one thread per pool (numba, OpenMP, BLAS): the workers do not fight over the cores
+        env = client.run(lambda: {k: os.environ.get(k) for k in sweep_tasks.WORKER_THREADS_ENV})
+        assert list(env.values()) == [{k: "1" for k in sweep_tasks.WORKER_THREADS_ENV}]
     finally:
         client.close()
         cluster.close()
