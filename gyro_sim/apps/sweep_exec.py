@@ -120,6 +120,7 @@ class SweepResult:
     rows: list  # flat rows (table columns), by variant index
     n_total: int = 0
     n_run: int = 0  # run now
+    sim_cpu: float = 0.0  # s of CPU in the runs themselves (gyro_sim.run, in whichever process ran them), run now
     n_skipped: int = 0  # already in the results file
     n_invalid: int = 0
     n_failed: int = 0  # failed runs (all, this time or before)
@@ -285,6 +286,7 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
         if journal is not None:
             journal.add(rows)
         res.n_run += sum(1 for r in rows if r["status"] != "invalid")
+        res.sim_cpu += sum(r.get("sim_cpu") or 0.0 for r in rows)
         bar.update(rows)
 
     client = cluster = None
