@@ -361,7 +361,7 @@ def test_startup_and_sweep_parts(tmp_path):
             assert r["compile_s"] == 0 and r["first_s"] > 0 and r["again_s"] > 0 and r["import_s"] > 0
     for r in res.startup:
         r["load"] = "–"
-    bench_scaling.sweep_part(res, runs=8, mc=12, say=lambda s: None)
+    bench_scaling.sweep_part(res, quick=True, runs=8, mc=12, say=lambda s: None)
     (row,) = res.sweep
     for k in ("in_process", "local_1", "local_2", "processes_1", "processes_2", "mc_one", "mc_auto"):
         o = row[k]

@@ -156,8 +156,10 @@ def two_processes(spec, n: int = 2, repeats: int = 1) -> dict:
             "    print(json.dumps({'t0': t0, 't1': time.time(), 'ok': sum(r['status'] == 'ok' for r in rows)}), "
             "flush=True)\n")
     with tempfile.TemporaryDirectory(prefix="gyro_two_") as cwd:
+        from gyro_sim.apps.bench_sweep import this_code_env
+
         procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                  text=True, cwd=cwd) for _ in parts]
+                                  text=True, cwd=cwd, env=this_code_env()) for _ in parts]
         try:
             for p, part in zip(procs, parts):
                 p.stdin.write(json.dumps([payload, part]) + "\n")

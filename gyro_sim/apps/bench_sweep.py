@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["sweep_spec", "mc_spec", "cpu_all", "scheduler_processes", "sweep_figures", "headline", "markdown"]
+__all__ = ["this_code_env", "sweep_spec", "mc_spec", "cpu_all", "scheduler_processes", "sweep_figures", "headline", "markdown"]
 
 #: the configurations timed in turn: label → (cluster: None | "local" | "processes", workers used)
 CONFIGS = {"in_process": (None, 0), "local_1": ("local", 1), "local_2": ("local", 2),
@@ -46,6 +46,16 @@ TITLES = {"in_process": "in this process (journal + Parquet)", "local_1": "local
 
 def _load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "–"
+
+
+def this_code_env(**extra) -> dict:
+    """The environment of a new process that imports this process's ``gyro_sim`` (its source tree first on
+    PYTHONPATH: the processes measured run the code measured, whatever is installed)."""
+    import gyro_sim
+
+    tree = str(Path(gyro_sim.__file__).resolve().parents[1])
+    path = os.environ.get("PYTHONPATH")
+    return dict(os.environ, PYTHONPATH=tree + (os.pathsep + path if path else ""), **extra)
 
 
 def sweep_spec(runs: int, duration: float = 2.0):
@@ -112,7 +122,7 @@ def command_pass(runs: int, folder: str) -> dict:
             "--workers", "0", "--quiet", "--no-plot", "--no-resume", "--out", str(Path(folder) / "command.parquet")]
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     w0 = time.perf_counter()
-    p = subprocess.run(args, capture_output=True, text=True, timeout=900, cwd=folder)
+    p = subprocess.run(args, capture_output=True, text=True, timeout=900, cwd=folder, env=this_code_env())
     wall = time.perf_counter() - w0
     r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if p.returncode != 0:
@@ -129,8 +139,8 @@ def scheduler_processes(folder: str, nworkers: int = 2):
     from gyro_sim.apps.sweep_tasks import WORKER_THREADS_ENV
 
     sched_file = Path(folder) / "scheduler.json"
-    env = dict(os.environ, DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED="False",
-               **{k: str(v) for k, v in WORKER_THREADS_ENV.items()})
+    env = this_code_env(DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED="False",
+                        **{k: str(v) for k, v in WORKER_THREADS_ENV.items()})
     procs: list = []
 
     def start(args, name):
