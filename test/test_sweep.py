@@ -501,6 +501,32 @@ def test_local_cluster_workers_run_without_the_profiler():
     assert dask.config.get("distributed.worker.profile.enabled") is True  # (this process's setting untouched)
 
 
+def _loaded_kernels() -> int:
+    """Compiled kernel versions loaded in this process (numba dispatchers of gyro_sim's and gyro_ctl's modules)."""
+    from numba.core.registry import CPUDispatcher
+
+    mods = [m for name, m in list(sys.modules.items()) if m is not None and name.split(".")[0] in ("gyro_sim", "gyro_ctl")]
+    return sum(len(v.overloads) for m in mods for v in list(vars(m).values()) if isinstance(v, CPUDispatcher))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster forks its workers on Linux only")
+def test_local_cluster_workers_start_warm():
+    """On Linux the local cluster's workers are forked from this process after its warm-up run: they start with
+    gyro_sim imported and the sweep's kernels loaded (with spawn each imported and loaded them anew: 2 s of CPU for 2
+    workers, more than 128 runs of the default scene), and give the same numbers (test_local_cluster_gives_...)."""
+    spec = tiny()
+    payload, items = spec.payload(), [(v.run_id, v.values) for v in spec.variants()]
+    sweep_exec.warm_up({**payload, "set": {**payload["set"], "initial.theta": 9.0}}, items)  # invalid: no raise
+    client, cluster, n, _ = sw._dask_client(2, None, warm=lambda: sweep_exec.warm_up(payload, items))
+    try:
+        here = _loaded_kernels()
+        there = client.run(_loaded_kernels)  # (before any task)
+        assert here > 0 and list(there.values()) == [here, here]
+    finally:
+        client.close()
+        cluster.close()
+
+
 @pytest.fixture
 def dask_processes(tmp_path):
     """A ``dask scheduler`` and ``dask worker --nworkers 2`` as separate processes, on 127.0.0.1 only; every

@@ -171,8 +171,32 @@ class _Progress:
             self.bar.close()
 
 
-def _dask_client(workers: Optional[int], scheduler: Optional[str]):
-    """(client, cluster or None, n_workers, mode)."""
+#: s of simulated time of :func:`warm_up`'s run (the kernels a scene uses load in its first steps)
+WARM_SECONDS = 0.02
+
+
+def warm_up(payload: dict, items: Sequence[tuple]) -> None:
+    """Load in this process the compiled kernels the sweep's runs use: the first variant run over
+    :data:`WARM_SECONDS` (or less, if it is shorter), its result dropped. Before a local cluster starts its workers by
+    ``fork`` (:data:`gyro_sim.apps.sweep_tasks.START_METHOD`) they all inherit them instead of loading them each.
+    Never raises: a variant that does not validate or fails here fails where it runs, with its message."""
+    if not items:
+        return
+    from gyro_sim.engine.simulate import run
+
+    run_id, values = items[0]
+    args = (payload.get("where", ""), payload.get("name", "scene"))
+    try:
+        scene = _scene_for(payload["scene"], payload.get("set") or {}, values, *args)
+        short = {**values, "duration": min(float(scene.duration), WARM_SECONDS)}
+        run(_scene_for(payload["scene"], payload.get("set") or {}, short, *args))
+    except Exception:  # noqa: BLE001 - best effort: the workers then load the kernels themselves
+        pass
+
+
+def _dask_client(workers: Optional[int], scheduler: Optional[str], warm: Optional[Callable] = None):
+    """(client, cluster or None, n_workers, mode). ``warm()``: called in this process before a local cluster's workers
+    start (with ``fork`` they inherit what it loaded; see :func:`warm_up`)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -199,6 +223,8 @@ def _dask_client(workers: Optional[int], scheduler: Optional[str]):
     from gyro_sim.apps.sweep_tasks import WORKER_CONFIG
 
     n = int(workers) if workers else (os.cpu_count() or 1)
+    if warm is not None and WORKER_CONFIG["distributed.worker.multiprocessing-method"] == "fork":
+        warm()
     with warnings.catch_warnings(), dask.config.set(WORKER_CONFIG):  # (the nannies pass it to their workers)
         # the scheduler's health endpoint moves off 8787 if that is taken
         warnings.filterwarnings("ignore", message=r"Port \d+ is already in use")
@@ -299,7 +325,8 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
                 res.startup = 0.0
             else:
                 t0 = time.perf_counter()
-                client, cluster, res.workers, res.mode = _dask_client(workers, scheduler)
+                client, cluster, res.workers, res.mode = _dask_client(workers, scheduler,
+                                                                      warm=lambda: warm_up(payload, items))
                 res.startup = time.perf_counter() - t0
             t0 = time.perf_counter()
             sizer = _execute(payload, items, client, batch, on_rows)
