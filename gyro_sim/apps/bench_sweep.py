@@ -12,7 +12,8 @@ started), the configurations taking turns for ``repeats`` rounds, the fastest pa
   127.0.0.1, with :data:`gyro_sim.apps.sweep_tasks.WORKER_THREADS_ENV`), reached by ``--scheduler`` as a user
   who outgrows one machine would: 1 and 2 workers;
 * two plain processes without Dask, half of the runs each (what 2 cores give with no task overhead);
-* the whole command ``gyro-sim sweep ... --workers 0`` as a new process (start, imports, kernel loads, table).
+* the whole command ``gyro-sim sweep ... --workers 0`` and ``--workers 2`` as a new process (start, imports,
+  kernel loads, cluster, table).
 
 For each: runs/s, runs/s per core, the CPU of every process taking part (this one and its children: client,
 scheduler, workers, nannies; ``psutil``) and the share of it outside the runs = 1 − Σ CPU inside ``gyro_sim.run``
@@ -114,12 +115,14 @@ def _in_process_pass(spec, folder: str) -> dict:
     return _figures(res.n_run, wall, cpu, res.sim_cpu, 1, res.n_run, res.n_failed)
 
 
-def command_pass(runs: int, folder: str) -> dict:
-    """``gyro-sim sweep spinup_thin_shell --vary controller.params.current=0.5:1.5:RUNS --set duration=2 --workers 0
-    --quiet --no-plot`` as a new process: wall s, CPU s (the child's rusage), runs/s end to end."""
+def command_pass(runs: int, folder: str, workers: int = 0) -> dict:
+    """``gyro-sim sweep spinup_thin_shell --vary controller.params.current=0.5:1.5:RUNS --set duration=2 --workers N
+    --quiet --no-plot`` as a new process: wall s, CPU s (the rusage of it and its children: a local cluster's
+    processes), runs/s end to end."""
     args = [sys.executable, "-m", "gyro_sim.apps.cli", "sweep", "spinup_thin_shell", "--vary",
             f"controller.params.current=0.5:1.5:{runs}", "--set", "duration=2", "--metric", "spin=final(spin)",
-            "--workers", "0", "--quiet", "--no-plot", "--no-resume", "--out", str(Path(folder) / "command.parquet")]
+            "--workers", str(workers), "--quiet", "--no-plot", "--no-resume",
+            "--out", str(Path(folder) / f"command{workers}.parquet")]
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     w0 = time.perf_counter()
     p = subprocess.run(args, capture_output=True, text=True, timeout=900, cwd=folder, env=this_code_env())
@@ -128,18 +131,21 @@ def command_pass(runs: int, folder: str) -> dict:
     if p.returncode != 0:
         raise RuntimeError(f"gyro-sim sweep failed: {p.stderr.strip()[-500:]}")
     cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    return {"runs": runs, "wall": wall, "cpu": cpu, "runs_per_s": runs / wall, "load": _load()}
+    return {"runs": runs, "workers": workers, "wall": wall, "cpu": cpu, "runs_per_s": runs / wall, "load": _load()}
 
 
 @contextlib.contextmanager
 def scheduler_processes(folder: str, nworkers: int = 2):
     """A ``dask scheduler`` and ``dask worker --nworkers N --nthreads 1`` started as separate processes on
-    127.0.0.1 (one thread per pool, Dask's profiler off, as the local cluster's workers); yields the scheduler's
+    127.0.0.1 (one thread per pool, Dask's profiler off, its monitor and tick slower, as the local cluster's
+    workers); yields the scheduler's
     address. Every process group started here is ended (TERM, then KILL) on the way out."""
     from gyro_sim.apps.sweep_tasks import WORKER_THREADS_ENV
 
     sched_file = Path(folder) / "scheduler.json"
     env = this_code_env(DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED="False",
+                        DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL="5s",
+                        DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL="500ms",
                         **{k: str(v) for k, v in WORKER_THREADS_ENV.items()})
     procs: list = []
 
@@ -236,6 +242,7 @@ def sweep_figures(runs: int = 128, mc: int = 1000, repeats: int = 3, processes: 
             out["mc_auto"] = _dask_pass(mpay, mitems, client, "auto", addrs)
             out["mc_gain"] = out["mc_auto"]["runs_per_s"] / out["mc_one"]["runs_per_s"]
         out["command"] = command_pass(runs, folder)
+        out["command_2"] = command_pass(runs, folder, workers=2)
     out["ratio_local"] = out["local_2"]["runs_per_s"] / out["local_1"]["runs_per_s"]
     if processes:
         out["ratio_processes"] = out["processes_2"]["runs_per_s"] / out["processes_1"]["runs_per_s"]
@@ -263,9 +270,9 @@ def lines(out: dict) -> list[str]:
         L.append(f"  Monte Carlo {a['runs']} variants on 2 workers: 1 run per task {a['runs_per_s']:.1f} runs/s "
                  f"(outside {a['outside']:.0%}), auto {b['runs_per_s']:.1f} runs/s in {b['tasks']} tasks "
                  f"(outside {b['outside']:.0%}): batch gain x{out['mc_gain']:.2f}")
-    c = out["command"]
-    L.append(f"  the whole command (new process, --workers 0): {c['wall']:.2f} s, CPU {c['cpu']:.2f} s, "
-             f"{c['runs_per_s']:.1f} runs/s end to end (load {c['load']})")
+    for c in (out["command"], out["command_2"]):
+        L.append(f"  the whole command (new process, --workers {c['workers']}): {c['wall']:.2f} s, CPU {c['cpu']:.2f} s, "
+                 f"{c['runs_per_s']:.1f} runs/s end to end (load {c['load']})")
     return L
 
 
@@ -296,13 +303,14 @@ def markdown(row: dict) -> list[str]:
             o = row[k]
             L.append(f"| {title} ({o['runs']} variants) | {o['runs_per_s']:.1f} | {o['per_core']:.1f} | {o['cpu']:.2f} | "
                      f"{o['sim_cpu']:.2f} | {o['outside']:.0%} | {o['tasks']} | {o['load']} |")
-    c = row["command"]
+    c, c2 = row["command"], row["command_2"]
     L += ["", f"2 workers / 1 worker: x{row['ratio_local']:.2f} (local cluster)"
           + (f", x{row['ratio_processes']:.2f} (dask scheduler + dask worker)" if "ratio_processes" in row else "")
           + (f"; Monte Carlo batch gain (auto over 1 run per task) x{row['mc_gain']:.2f}" if "mc_gain" in row else "")
-          + f". The whole command as a new process (`--workers 0`): {c['wall']:.2f} s, {c['cpu']:.2f} s CPU, "
-          f"{c['runs_per_s']:.1f} runs/s end to end. Cluster start + warm-up {row['cluster_start']:.2f} s, not in the "
-          f"figures. Load {row['load_start']} → {row['load_end']}.", ""]
+          + f". The whole command as a new process: `--workers 0` {c['wall']:.2f} s, {c['cpu']:.2f} s CPU, "
+          f"{c['runs_per_s']:.1f} runs/s end to end (load {c['load']}); `--workers 2` {c2['wall']:.2f} s, "
+          f"{c2['cpu']:.2f} s CPU, {c2['runs_per_s']:.1f} runs/s (load {c2['load']}). Cluster start + warm-up "
+          f"{row['cluster_start']:.2f} s, not in the table. Load {row['load_start']} → {row['load_end']}.", ""]
     return L
 
 

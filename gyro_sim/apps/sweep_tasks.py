@@ -118,7 +118,7 @@ def run_fixed(client, fn: Callable, payload, items: list, batch: int, on_rows: C
     futs = client.map(fn, [payload] * len(chunks), chunks, pure=False, **_placement(worker_addrs))
     index = {f.key: ch for f, ch in zip(futs, chunks)}
     try:
-        for fut in as_completed(futs):
+        for fut in as_completed(futs, loop=client.loop):  # (this client's loop: see run_adaptive)
             try:
                 rows = fut.result()
             except Exception as e:  # noqa: BLE001 - e.g. a worker that died (KilledWorker)
@@ -141,7 +141,9 @@ def run_adaptive(client, fn: Callable, payload, items: list, on_rows: Callable,
     sizer = sizer or TaskSizer(worker_slots(client, worker_addrs), task_seconds)
     place = _placement(worker_addrs)
     pending: dict = {}
-    done = as_completed()
+    # this client's event loop, not the default client's (the latest made in this process): on another client's
+    # loop the futures' ends were seen late — 7 runs/s instead of 80 with a second client open
+    done = as_completed(loop=client.loop)
     sent = 0
 
     def send() -> None:
