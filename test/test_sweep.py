@@ -505,7 +505,8 @@ def _loaded_kernels() -> int:
     """Compiled kernel versions loaded in this process (numba dispatchers of gyro_sim's and gyro_ctl's modules)."""
     from numba.core.registry import CPUDispatcher
 
-    mods = [m for name, m in list(sys.modules.items()) if m is not None and name.split(".")[0] in ("gyro_sim", "gyro_ctl")]
+    mods = [m for name, m in list(sys.modules.items())
+            if m is not None and name.split(".")[0] in ("gyro_sim", "gyro_ctl")]
     return sum(len(v.overloads) for m in mods for v in list(vars(m).values()) if isinstance(v, CPUDispatcher))
 
 

@@ -18,7 +18,6 @@ part.
 """
 from __future__ import annotations
 
-import io
 import json
 import os
 import statistics

@@ -35,7 +35,8 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["this_code_env", "sweep_spec", "mc_spec", "cpu_all", "scheduler_processes", "sweep_figures", "headline", "markdown"]
+__all__ = ["this_code_env", "sweep_spec", "mc_spec", "cpu_all", "scheduler_processes", "sweep_figures", "headline",
+           "markdown"]
 
 #: the configurations timed in turn: label → (cluster: None | "local" | "processes", workers used)
 CONFIGS = {"in_process": (None, 0), "local_1": ("local", 1), "local_2": ("local", 2),
@@ -79,7 +80,7 @@ def mc_spec(samples: int, duration: float = 2.0, seed: int = 0):
 
 def cpu_all() -> float:
     """CPU s (user + system) so far of this process and every live child of it (the cluster's processes)."""
-    import psutil
+    import psutil  # type: ignore[import-untyped]  # (distributed needs it: the sweep extra)
 
     me = psutil.Process()
     total = 0.0
@@ -221,11 +222,11 @@ def sweep_figures(runs: int = 128, mc: int = 1000, repeats: int = 3, processes: 
         two: list = []
         for _ in range(max(1, repeats)):
             for label in labels:
-                kind, nw = CONFIGS[label]
-                if kind is None:
+                where, nw = CONFIGS[label]
+                if where is None:
                     passes[label].append(_in_process_pass(spec, folder))
                 else:
-                    client, addrs = clusters[kind]
+                    client, addrs = clusters[where]
                     passes[label].append(_dask_pass(payload, items, client, "auto", addrs[:nw]))
                 say(f"[sweep] {TITLES[label]}: {passes[label][-1]['runs_per_s']:.1f} runs/s "
                     f"(load {passes[label][-1]['load']})")
@@ -258,8 +259,9 @@ def lines(out: dict) -> list[str]:
     for label, title in TITLES.items():
         if label in out:
             o = out[label]
-            L.append(f"  {title:<42s}{o['runs_per_s']:8.1f} runs/s ({o['per_core']:.1f} per core)  CPU {o['cpu']:.2f} s, "
-                     f"in the runs {o['sim_cpu']:.2f} s: outside {o['outside']:.0%}  {o['tasks']} tasks  load {o['load']}")
+            L.append(f"  {title:<42s}{o['runs_per_s']:8.1f} runs/s ({o['per_core']:.1f} per core)  "
+                     f"CPU {o['cpu']:.2f} s, in the runs {o['sim_cpu']:.2f} s: outside {o['outside']:.0%}  "
+                     f"{o['tasks']} tasks  load {o['load']}")
     L.append(f"  2 workers / 1 worker: local cluster x{out['ratio_local']:.2f}"
              + (f", separate processes x{out['ratio_processes']:.2f}" if "ratio_processes" in out else ""))
     t = out["two_processes"]
@@ -271,14 +273,16 @@ def lines(out: dict) -> list[str]:
                  f"(outside {a['outside']:.0%}), auto {b['runs_per_s']:.1f} runs/s in {b['tasks']} tasks "
                  f"(outside {b['outside']:.0%}): batch gain x{out['mc_gain']:.2f}")
     for c in (out["command"], out["command_2"]):
-        L.append(f"  the whole command (new process, --workers {c['workers']}): {c['wall']:.2f} s, CPU {c['cpu']:.2f} s, "
+        L.append(f"  the whole command (new process, --workers {c['workers']}): {c['wall']:.2f} s, "
+                 f"CPU {c['cpu']:.2f} s, "
                  f"{c['runs_per_s']:.1f} runs/s end to end (load {c['load']})")
     return L
 
 
 def headline(row: dict) -> str:
     o = row
-    return (f"sweep of {o['runs']} runs of {o['duration']:g} s: {o['in_process']['runs_per_s']:.1f} runs/s in one process "
+    return (f"sweep of {o['runs']} runs of {o['duration']:g} s: {o['in_process']['runs_per_s']:.1f} runs/s in one "
+            f"process "
             f"({o['in_process']['outside']:.0%} of its CPU outside the runs), {o['local_2']['runs_per_s']:.1f} on 2 "
             f"workers = x{o['ratio_local']:.2f} of 1 worker ({o['local_2']['outside']:.0%} outside)"
             + (f"; Monte Carlo batch gain x{o['mc_gain']:.2f}" if "mc_gain" in o else "")
@@ -299,9 +303,11 @@ def markdown(row: dict) -> list[str]:
     L.append(f"| 2 plain processes, half each | {t['runs_per_s']:.1f} | {t['runs_per_s'] / 2:.1f} | | | | 2 | "
              f"{t['load']} |")
     if "mc_gain" in row:
-        for k, title in (("mc_one", "Monte Carlo, 2 workers, 1 run per task"), ("mc_auto", "Monte Carlo, 2 workers, auto")):
+        for k, title in (("mc_one", "Monte Carlo, 2 workers, 1 run per task"),
+                         ("mc_auto", "Monte Carlo, 2 workers, auto")):
             o = row[k]
-            L.append(f"| {title} ({o['runs']} variants) | {o['runs_per_s']:.1f} | {o['per_core']:.1f} | {o['cpu']:.2f} | "
+            L.append(f"| {title} ({o['runs']} variants) | {o['runs_per_s']:.1f} | {o['per_core']:.1f} | "
+                     f"{o['cpu']:.2f} | "
                      f"{o['sim_cpu']:.2f} | {o['outside']:.0%} | {o['tasks']} | {o['load']} |")
     c, c2 = row["command"], row["command_2"]
     L += ["", f"2 workers / 1 worker: x{row['ratio_local']:.2f} (local cluster)"

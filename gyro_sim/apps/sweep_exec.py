@@ -4,7 +4,6 @@ dask.distributed and tqdm are imported only where used.
 """
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -138,7 +137,8 @@ class SweepResult:
 
 
 #: the progress bar's line (tqdm): runs done of all, failures, runs/s and the time left
-PROGRESS_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} runs{postfix} [{elapsed}, {rate_fmt}, ETA {remaining}]"
+PROGRESS_FORMAT = ("{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} runs{postfix} "
+                   "[{elapsed}, {rate_fmt}, ETA {remaining}]")
 
 
 class _Progress:

@@ -25,8 +25,8 @@ import statistics
 import sys
 from typing import Callable, Optional, Sequence
 
-__all__ = ["TASK_SECONDS", "TASKS_AHEAD", "WORKER_THREADS_ENV", "START_METHOD", "WORKER_CONFIG", "TaskSizer", "worker_slots", "failed_rows",
-           "run_fixed", "run_adaptive"]
+__all__ = ["TASK_SECONDS", "TASKS_AHEAD", "WORKER_THREADS_ENV", "START_METHOD", "WORKER_CONFIG", "TaskSizer",
+           "worker_slots", "failed_rows", "run_fixed", "run_adaptive"]
 
 #: s of runs a task aims at: long against the 1.5–7 ms each task costs, short enough for an even finish
 TASK_SECONDS = 0.25
