@@ -5,7 +5,6 @@ in-process). Runs are tiny (20 ms of nutation_oblate); ``-s`` prints the measure
 import json
 import math
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -563,50 +562,18 @@ def test_tasks_are_awaited_on_their_clients_loop(monkeypatch):
 
 @pytest.fixture
 def dask_processes(tmp_path):
-    """A ``dask scheduler`` and ``dask worker --nworkers 2`` as separate processes, on 127.0.0.1 only; every
-    process group is ended (TERM, then KILL) whatever the test does."""
-    sched_file = tmp_path / "scheduler.json"
-    procs = []
+    """A ``dask scheduler`` and ``dask worker --nworkers 2`` as separate processes, on 127.0.0.1 only
+    (:func:`gyro_sim.apps.bench_sweep.scheduler_processes`: every process group is ended, TERM then KILL, whatever
+    the test does); yields the scheduler file."""
+    from gyro_sim.apps.bench_sweep import scheduler_processes
 
-    def start(args, name):
-        log = open(tmp_path / f"{name}.log", "w")
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", *args], stdout=log, stderr=subprocess.STDOUT,
-                                      stdin=subprocess.DEVNULL, start_new_session=True, cwd=tmp_path))
-        log.close()
-
-    try:
-        start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file",
-               str(sched_file), "--idle-timeout", "300s"], "scheduler")
-        deadline = time.monotonic() + 60
-        while not sched_file.is_file() and time.monotonic() < deadline:
-            assert procs[0].poll() is None, (tmp_path / "scheduler.log").read_text()
-            time.sleep(0.1)
-        assert sched_file.is_file(), (tmp_path / "scheduler.log").read_text()
-        start(["worker", "--scheduler-file", str(sched_file), "--host", "127.0.0.1", "--nworkers", "2",
-               "--nthreads", "1", "--no-dashboard", "--local-directory", str(tmp_path / "work"),
-               "--death-timeout", "60"], "workers")
-        yield sched_file, procs
-    finally:
-        for p in reversed(procs):
-            try:
-                os.killpg(p.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-        for p in reversed(procs):
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                pass
-            try:
-                os.killpg(p.pid, signal.SIGKILL)  # anything left in the group (nanny's workers)
-            except ProcessLookupError:
-                pass
-            p.wait()
+    with scheduler_processes(str(tmp_path), 2):
+        yield tmp_path / "scheduler.json"
 
 
 def test_scheduler_processes_give_the_local_numbers(reference, dask_processes):
     spec, serial, local = reference
-    sched_file, procs = dask_processes
+    sched_file = dask_processes
     address = json.loads(sched_file.read_text())["address"]
     assert address.startswith("tcp://127.0.0.1:")
     t0 = time.perf_counter()
