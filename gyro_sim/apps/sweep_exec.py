@@ -171,27 +171,27 @@ class _Progress:
             self.bar.close()
 
 
-#: s of simulated time of :func:`warm_up`'s run (the kernels a scene uses load in its first steps)
-WARM_SECONDS = 0.02
+#: s of simulated time of :func:`warm_up`'s run (0.02 s left a first full run of the default scene 3x slower: not
+#: every kernel is called in its first steps)
+WARM_SECONDS = 0.1
 
 
 def warm_up(payload: dict, items: Sequence[tuple]) -> None:
-    """Load in this process the compiled kernels the sweep's runs use: the first variant run over
-    :data:`WARM_SECONDS` (or less, if it is shorter), its result dropped. Before a local cluster starts its workers by
-    ``fork`` (:data:`gyro_sim.apps.sweep_tasks.START_METHOD`) they all inherit them instead of loading them each.
-    Never raises: a variant that does not validate or fails here fails where it runs, with its message."""
+    """Load in this process the compiled kernels the sweep's runs and metrics use: the first variant's row computed
+    over :data:`WARM_SECONDS` of simulated time (or less, if it is shorter), then dropped. Before a local cluster
+    starts its workers by ``fork`` (:data:`gyro_sim.apps.sweep_tasks.START_METHOD`) they all inherit them instead of
+    loading them each. Never raises for a bad variant: one that does not validate or fails here fails where it runs,
+    with its message."""
     if not items:
         return
-    from gyro_sim.engine.simulate import run
-
     run_id, values = items[0]
-    args = (payload.get("where", ""), payload.get("name", "scene"))
     try:
-        scene = _scene_for(payload["scene"], payload.get("set") or {}, values, *args)
+        scene = _scene_for(payload["scene"], payload.get("set") or {}, values, payload.get("where", ""),
+                           payload.get("name", "scene"))
         short = {**values, "duration": min(float(scene.duration), WARM_SECONDS)}
-        run(_scene_for(payload["scene"], payload.get("set") or {}, short, *args))
     except Exception:  # noqa: BLE001 - best effort: the workers then load the kernels themselves
-        pass
+        return
+    run_chunk(payload, [(run_id, short)])
 
 
 def _dask_client(workers: Optional[int], scheduler: Optional[str], warm: Optional[Callable] = None):
