@@ -267,10 +267,11 @@ def _execute(payload: dict, items: list, client, batch, on_rows: Callable, worke
 def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Optional[int] = None,
               scheduler: Optional[str] = None, batch="auto", resume: bool = True, retry_failed: bool = False,
               progress: bool = True) -> SweepResult:
-    """Run every variant of ``spec``: validated first, then as Dask tasks (``workers`` = 0: in this
-    process), skipping the runs ``out`` already holds. Writes ``out`` (Parquet) if given. ``batch``: variants
+    """Run every variant of ``spec`` as Dask tasks (``workers`` = 0: in this process), each validated where it runs
+    (an invalid one is a row of status ``invalid``), skipping the runs ``out`` already holds. Writes ``out`` (Parquet)
+    if given, its journal in batches as the runs end (:class:`gyro_sim.apps.sweep_io.Journal`). ``batch``: variants
     per task, or ``"auto"``: each task sized as it is sent (:mod:`gyro_sim.sweep_tasks`); the results do not
-    depend on it."""
+    depend on it. A local cluster's workers start from this process after :func:`warm_up` (``fork``, on Linux)."""
     t_start = time.perf_counter()
     from gyro_sim.common.extras import MissingExtra
 
