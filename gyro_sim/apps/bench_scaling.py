@@ -11,7 +11,8 @@ cost, measured in one run.
 * sweep: :mod:`gyro_sim.apps.bench_sweep` (issue 32): runs/s of a sweep of short runs in this process, on 1 and 2
   workers of a local cluster and of a cluster started as separate processes, the share of the CPU of every process
   outside the runs, the whole command, and the gain of batching 1,000 Monte Carlo variants per task; beside them
-  :func:`two_processes`, each running half of the runs at once without Dask (the most 2 cores give).
+  :func:`gyro_sim.apps.bench_sweep.two_processes`, each running half of the runs at once without Dask (the most 2
+  cores give).
 
 Ratios within one run only: the machine is shared, its load (``/proc/loadavg``) is recorded before and after each
 part.
@@ -28,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["STARTUP_CASES", "startup_times", "startup_part", "two_processes", "sweep_part",
+__all__ = ["STARTUP_CASES", "startup_times", "startup_part", "sweep_part",
            "headline", "markdown"]
 
 #: the first run's process: says when its first run is done (the parent's clock stops there), then the import, first
@@ -140,47 +141,6 @@ def startup_part(res, quick: bool = False, baseline: Optional[str] = None, say=p
 # ------------------------------------------------------------------------------------------
 # sweep scaling
 # ------------------------------------------------------------------------------------------
-def two_processes(spec, n: int = 2, repeats: int = 1) -> dict:
-    """``n`` processes without Dask, each running 1/n of the variants in a loop at once (after its warm-up): wall s
-    from the common start to the last end, runs/s (the fastest of ``repeats`` passes). What ``n`` cores give with no
-    task overhead at all."""
-    items = [(v.run_id, v.values) for v in spec.variants()]
-    parts = [items[i::n] for i in range(n)]
-    payload = spec.payload()
-    code = ("import json, sys, time\nfrom gyro_sim.sweep import run_chunk\n"
-            "payload, items = json.loads(sys.stdin.readline())\nitems = [tuple(x) for x in items]\n"
-            "run_chunk(payload, items[:1])\nprint('ready', flush=True)\n"
-            "while sys.stdin.readline():\n"
-            "    t0 = time.time()\n    rows = run_chunk(payload, items)\n"
-            "    print(json.dumps({'t0': t0, 't1': time.time(), 'ok': sum(r['status'] == 'ok' for r in rows)}), "
-            "flush=True)\n")
-    with tempfile.TemporaryDirectory(prefix="gyro_two_") as cwd:
-        from gyro_sim.apps.bench_sweep import this_code_env
-
-        procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                  text=True, cwd=cwd, env=this_code_env()) for _ in parts]
-        try:
-            for p, part in zip(procs, parts):
-                p.stdin.write(json.dumps([payload, part]) + "\n")
-                p.stdin.flush()
-            for p in procs:
-                assert p.stdout.readline().strip() == "ready"
-            passes = []
-            for _ in range(max(1, int(repeats))):
-                for p in procs:  # go
-                    p.stdin.write("\n")
-                    p.stdin.flush()
-                ends = [json.loads(p.stdout.readline()) for p in procs]
-                wall = max(e["t1"] for e in ends) - min(e["t0"] for e in ends)
-                passes.append({"processes": n, "wall": wall, "runs_per_s": len(items) / wall,
-                               "ok": sum(e["ok"] for e in ends)})
-        finally:
-            for p in procs:
-                p.stdin.close()
-                p.wait(timeout=60)
-    return max(passes, key=lambda o: o["runs_per_s"])
-
-
 def sweep_part(res, quick: bool = False, runs: Optional[int] = None, mc: Optional[int] = None, say=print) -> None:
     """Fill ``res.sweep``: :func:`gyro_sim.apps.bench_sweep.sweep_part` (issue 32's figures)."""
     from gyro_sim.apps import bench_sweep

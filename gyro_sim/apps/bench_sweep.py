@@ -35,8 +35,8 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["this_code_env", "sweep_spec", "mc_spec", "cpu_all", "scheduler_processes", "sweep_figures", "headline",
-           "markdown"]
+__all__ = ["this_code_env", "sweep_spec", "mc_spec", "cpu_all", "scheduler_processes", "two_processes",
+           "sweep_figures", "headline", "markdown"]
 
 #: the configurations timed in turn: label → (cluster: None | "local" | "processes", workers used)
 CONFIGS = {"in_process": (None, 0), "local_1": ("local", 1), "local_2": ("local", 2),
@@ -179,6 +179,46 @@ def scheduler_processes(folder: str, nworkers: int = 2):
             p.wait()
 
 
+def two_processes(spec, n: int = 2, repeats: int = 1) -> dict:
+    """``n`` processes without Dask, each running 1/n of the variants in a loop at once (after its warm-up): wall s
+    from the common start to the last end, runs/s (the fastest of ``repeats`` passes). What ``n`` cores give with no
+    task overhead at all."""
+    items = [(v.run_id, v.values) for v in spec.variants()]
+    parts = [items[i::n] for i in range(n)]
+    payload = spec.payload()
+    code = ("import json, sys, time\nfrom gyro_sim.sweep import run_chunk\n"
+            "payload, items = json.loads(sys.stdin.readline())\nitems = [tuple(x) for x in items]\n"
+            "run_chunk(payload, items[:1])\nprint('ready', flush=True)\n"
+            "while sys.stdin.readline():\n"
+            "    t0 = time.time()\n    rows = run_chunk(payload, items)\n"
+            "    print(json.dumps({'t0': t0, 't1': time.time(), 'ok': sum(r['status'] == 'ok' for r in rows)}), "
+            "flush=True)\n")
+    with tempfile.TemporaryDirectory(prefix="gyro_two_") as cwd:
+        procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                  text=True, cwd=cwd, env=this_code_env()) for _ in parts]
+        pipes = [(p.stdin, p.stdout) for p in procs if p.stdin is not None and p.stdout is not None]
+        try:
+            for (stdin, _), part in zip(pipes, parts, strict=True):
+                stdin.write(json.dumps([payload, part]) + "\n")
+                stdin.flush()
+            for _, stdout in pipes:
+                assert stdout.readline().strip() == "ready"
+            passes = []
+            for _ in range(max(1, int(repeats))):
+                for stdin, _ in pipes:  # go
+                    stdin.write("\n")
+                    stdin.flush()
+                ends = [json.loads(stdout.readline()) for _, stdout in pipes]
+                wall = max(e["t1"] for e in ends) - min(e["t0"] for e in ends)
+                passes.append({"processes": n, "wall": wall, "runs_per_s": len(items) / wall,
+                               "ok": sum(e["ok"] for e in ends)})
+        finally:
+            for p, (stdin, _) in zip(procs, pipes, strict=True):
+                stdin.close()
+                p.wait(timeout=60)
+    return max(passes, key=lambda o: o["runs_per_s"])
+
+
 def _connect(kind: str, folder: str, stack: contextlib.ExitStack, workers: int):
     """(client, worker addresses sorted) of a warm cluster of ``workers`` workers: local or separate processes."""
     from gyro_sim.apps.sweep_exec import _dask_client
@@ -200,7 +240,6 @@ def sweep_figures(runs: int = 128, mc: int = 1000, repeats: int = 3, processes: 
     (``processes``: with the separate-process cluster), ``repeats`` rounds taking turns, the fastest pass each; two
     plain processes; the whole command; ``mc`` Monte Carlo variants one run per task against ``auto`` on 2 workers
     (0: skipped)."""
-    from gyro_sim.apps.bench_scaling import two_processes
     from gyro_sim.apps.sweep_exec import run_chunk
 
     spec = sweep_spec(runs)
