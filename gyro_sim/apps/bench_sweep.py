@@ -15,8 +15,8 @@ started), the configurations taking turns for ``repeats`` rounds, the fastest pa
 * the whole command ``gyro-sim sweep ... --workers 0`` and ``--workers 2`` as a new process (start, imports,
   kernel loads, cluster, table).
 
-For each: runs/s, runs/s per core, the CPU of every process taking part (this one and its children: client,
-scheduler, workers, nannies; ``psutil``) and the share of it outside the runs = 1 − Σ CPU inside ``gyro_sim.run``
+For each: runs/s, runs/s per core, the CPU of every process taking part (this one — the client, and a local
+cluster's scheduler —, the workers, a separate scheduler: :func:`cpu_all`) and the share of it outside the runs = 1 − Σ CPU inside ``gyro_sim.run``
 (``sim_cpu`` of each row, the worker's thread) / that CPU. Then Monte Carlo: 1,000 variants (random current) on 2
 workers, one run per task against tasks of many runs (``auto``): the gain of batching variants per task.
 Ratios within one run only: the machine is shared, its load (``/proc/loadavg``) is kept with each figure.
@@ -78,16 +78,15 @@ def mc_spec(samples: int, duration: float = 2.0, seed: int = 0):
                            "seed": seed, "metrics": {"spin": "final(spin)"}}, where="bench")
 
 
-def cpu_all() -> float:
-    """CPU s (user + system) so far of this process and every live child of it (the cluster's processes)."""
-    import psutil  # type: ignore[import-untyped]  # (distributed needs it: the sweep extra)
-
-    me = psutil.Process()
-    total = 0.0
-    for p in [me, *me.children(recursive=True)]:
-        with contextlib.suppress(psutil.Error):
-            t = p.cpu_times()
-            total += t.user + t.system
+def cpu_all(client=None) -> float:
+    """CPU s (user + system) so far of this process and, with a Dask ``client``, of every worker process and of the
+    scheduler's process if it is another (each asked for its ``time.process_time``). A local cluster's scheduler
+    runs in this process; the nannies, which only watch their workers, are not counted."""
+    total = time.process_time()
+    if client is not None:
+        total += sum(client.run(time.process_time).values())
+        if client.run_on_scheduler(os.getpid) != os.getpid():
+            total += client.run_on_scheduler(time.process_time)
     return total
 
 
@@ -100,9 +99,9 @@ def _figures(n: int, wall: float, cpu: float, sim: float, cores: int, tasks: int
 def _dask_pass(payload: dict, items: list, client, batch, addrs) -> dict:
     from gyro_sim.apps.sweep_exec import _timed_rows
 
-    c0 = cpu_all()
+    c0 = cpu_all(client)
     wall, rows, tasks = _timed_rows(payload, items, client, batch, worker_addrs=addrs)
-    cpu = cpu_all() - c0
+    cpu = cpu_all(client) - c0
     return _figures(len(items), wall, cpu, sum(r.get("sim_cpu") or 0.0 for r in rows), len(addrs), tasks,
                     sum(r["status"] != "ok" for r in rows))
 
