@@ -17,8 +17,9 @@ started), the configurations taking turns for ``repeats`` rounds, the fastest pa
 
 For each: runs/s, runs/s per core, the CPU of every process taking part (this one — the client, and a local
 cluster's scheduler —, the workers, a separate scheduler: :func:`cpu_all`) and the share of it outside the runs
-= 1 − Σ CPU inside ``gyro_sim.run`` (``sim_cpu`` of each row, the worker's thread) / that CPU. Then Monte Carlo: 1,000 variants (random current) on 2
-workers, one run per task against tasks of many runs (``auto``): the gain of batching variants per task.
+= 1 − Σ CPU inside ``gyro_sim.run`` (``sim_cpu`` of each row, the worker's thread) / that CPU. Then Monte Carlo:
+1,000 variants (random current) on 2 workers, one run per task against tasks of many runs (``auto``): the gain of
+batching variants per task.
 Ratios within one run only: the machine is shared, its load (``/proc/loadavg``) is kept with each figure.
 """
 from __future__ import annotations
