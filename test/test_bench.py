@@ -365,13 +365,16 @@ def test_startup_and_sweep_parts(tmp_path):
             assert r["compile_s"] == 0 and r["first_s"] > 0 and r["again_s"] > 0 and r["import_s"] > 0
     for r in res.startup:
         r["load"] = "–"
-    bench_scaling.sweep_part(res, runs=8, say=lambda s: None)
+    bench_scaling.sweep_part(res, quick=True, runs=8, mc=12, say=lambda s: None)
     (row,) = res.sweep
-    m = row["measure"]
-    for k in bench_scaling.SWEEP_CONFIGS:
-        assert m[k]["failed"] == 0 and m[k]["runs_per_s"] > 0 and m[k]["run_cpu_ratio"] > 0
+    for k in ("in_process", "local_1", "local_2", "processes_1", "processes_2", "mc_one", "mc_auto"):
+        o = row[k]
+        assert o["failed"] == 0 and o["runs_per_s"] > 0 and 0 < o["sim_cpu"] and o["outside"] < 1, (k, o)
+    assert row["mc_one"]["tasks"] == 12 and row["mc_auto"]["tasks"] < 12 and row["mc_gain"] > 0
+    assert row["ratio_local"] > 0 and row["ratio_processes"] > 0
+    assert row["command"]["runs"] == row["command_2"]["runs"] == 8
     assert row["two_processes"]["ok"] == 8 and row["two_processes"]["runs_per_s"] > 0
     md = "\n".join(bench_scaling.markdown(res))
-    assert "## Start-up of a process" in md and "## Sweep scaling" in md and "auto batch" in md
+    assert "## Start-up of a process" in md and "## Sweep (8 runs" in md and "outside" in md
     assert any("start-up" in s for s in bench_scaling.headline(res))
     assert any("sweep of 8 runs" in s for s in bench_scaling.headline(res))

@@ -5,7 +5,6 @@ in-process). Runs are tiny (20 ms of nutation_oblate); ``-s`` prints the measure
 import json
 import math
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -15,7 +14,7 @@ import pytest
 
 import gyro_sim
 from gyro_sim.apps import sweep as sw
-from gyro_sim.apps import sweep_exec  # (run_chunk and run_sweep live there: patch their names there)
+from gyro_sim.apps import sweep_exec, sweep_tasks  # (run_chunk and run_sweep live there: patch their names there)
 from gyro_sim.averaging.averaged import RotorK
 
 TINY = {"duration": 0.02, "output.rate": 500.0}
@@ -236,6 +235,88 @@ def test_parquet_table_holds_parameters_metrics_series_and_version(tmp_path):
     assert rows == [{k: r[k] for k in rows[0]} for r in res.rows]
 
 
+def test_a_variants_scene_is_built_once(monkeypatch):
+    """Each variant's scene is built and validated once per sweep, where it runs (it was built twice: validated by
+    the driver, then built again for the run); an invalid variant is still recorded with the loader's message."""
+    from gyro_sim.apps import sweep_spec
+
+    calls = []
+    real = sweep_spec._scene_for
+
+    def counting(*a, **k):
+        calls.append(a[2])
+        return real(*a, **k)
+
+    monkeypatch.setattr(sweep_spec, "_scene_for", counting)
+    monkeypatch.setattr(sweep_exec, "_scene_for", counting)
+    spec = tiny(vary={"controller.period": "0.001,0.002", "initial.theta": "0.2,3.5"},
+                random={"initial.psi": "uniform(0, 6.28)"}, samples=2)
+    res = sw.run_sweep(spec, workers=0, progress=False)
+    assert len(res.rows) == 8 and res.n_invalid == 4 and res.n_run == 4
+    assert sorted(map(str, calls)) == sorted(str(v.values) for v in spec.variants())  # one build per variant
+    assert all("initial.theta" in r["error"] for r in res.rows if r["status"] == "invalid")
+
+
+def test_journal_is_written_in_batches(tmp_path, monkeypatch):
+    """The journal takes a sweep's finished rows in batches (one write and flush per JOURNAL_SECONDS, and at the
+    end), not a line and a flush per run; a hard stop before the table is written still finds every finished run."""
+    from gyro_sim.apps import sweep_io
+
+    monkeypatch.setattr(sweep_io, "JOURNAL_SECONDS", 3600.0)
+    out = tmp_path / "j.parquet"
+    sizes = []
+    real = sw._run_scene
+
+    def watch(scene):
+        path = sw._journal_path(out)
+        sizes.append(path.stat().st_size if path.exists() else 0)
+        return real(scene)
+
+    def no_disk(*a, **k):
+        raise OSError("disk gone")
+
+    monkeypatch.setattr(sweep_exec, "_run_scene", watch)
+    monkeypatch.setattr(sweep_exec, "write_results", no_disk)
+    spec = tiny(vary={"controller.period": "0.001:0.006:6"})
+    with pytest.raises(OSError):
+        sw.run_sweep(spec, out=out, workers=0, progress=False)
+    assert sizes == [0] * 6  # nothing written while the runs went on
+    assert len(sw._read_journal(sw._journal_path(out))) == 6  # all of them at the end, in one write
+    j = sweep_io.Journal(tmp_path / "x.jsonl", seconds=0.0)
+    j.add([{"a": 1}, {"a": 2}])
+    j.add([{"a": 3}])
+    j.close()
+    assert j.writes == 2 and len(sw._read_journal(tmp_path / "x.jsonl")) == 3  # seconds=0: a write per batch
+
+
+def test_seeds_are_recorded_per_run(tmp_path):
+    """Each row holds the seed of its random draws (with its sample number they give its values again); a row
+    that draws nothing has none."""
+    out = tmp_path / "s.parquet"
+    spec = tiny(vary={"controller.period": "0.001,0.002"}, random={"initial.psi": "uniform(0, 6.28)"}, samples=2,
+                seed=41)
+    sw.run_sweep(spec, out=out, workers=0, progress=False)
+    rows, _ = sw.read_results(out)
+    assert [r["seed"] for r in rows] == [41] * 4 and [r["sample"] for r in rows] == [0, 1, 0, 1]
+    (rv,) = spec.random
+    assert all(r["initial.psi"] == rv.draw(r["seed"], r["sample"]) for r in rows)
+    grid = sw.run_sweep(tiny(), out=tmp_path / "g.parquet", workers=0, progress=False)
+    assert {r["seed"] for r in grid.rows} == {None}
+    with pytest.raises(sw.SweepError, match="reserved"):
+        sw.parse_metric("seed=final(spin)")
+
+
+def test_progress_bar_shows_runs_per_second_and_time_left():
+    import io
+
+    text = io.StringIO()
+    bar = sweep_exec._Progress(10, 2, "demo", True, stream=text)
+    bar.update([{"status": "ok"}, {"status": "failed"}])
+    bar.close()
+    line = text.getvalue().strip().splitlines()[-1]
+    assert "4/10 runs" in line and "1 failed" in line and "runs/s" in line and "ETA" in line, line
+
+
 def test_plots(tmp_path):
     one = sw.run_sweep(tiny(), workers=0, progress=False)
     two = sw.run_sweep(tiny(vary={"controller.period": "0.001,0.002,0.003", "initial.theta": "0.1,0.2,4.0"}),
@@ -411,58 +492,89 @@ def test_local_cluster_workers_run_without_the_profiler():
     try:
         on = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
         assert n == 1 and list(on.values()) == [False]
+        # one thread per pool (numba, OpenMP, BLAS): the workers do not fight over the cores
+        env = client.run(lambda: {k: os.environ.get(k) for k in sweep_tasks.WORKER_THREADS_ENV})
+        assert list(env.values()) == [{k: "1" for k in sweep_tasks.WORKER_THREADS_ENV}]
     finally:
         client.close()
         cluster.close()
     assert dask.config.get("distributed.worker.profile.enabled") is True  # (this process's setting untouched)
 
 
+def _loaded_kernels() -> int:
+    """Compiled kernel versions loaded in this process (numba dispatchers of gyro_sim's and gyro_ctl's modules)."""
+    from numba.core.registry import CPUDispatcher
+
+    mods = [m for name, m in list(sys.modules.items())
+            if m is not None and name.split(".")[0] in ("gyro_sim", "gyro_ctl")]
+    return sum(len(v.overloads) for m in mods for v in list(vars(m).values()) if isinstance(v, CPUDispatcher))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster forks its workers on Linux only")
+def test_local_cluster_workers_start_warm():
+    """On Linux the local cluster's workers are forked from this process after its warm-up run: they start with
+    gyro_sim imported and the sweep's kernels loaded (with spawn each imported and loaded them anew: 2 s of CPU for 2
+    workers, more than 128 runs of the default scene), and give the same numbers (test_local_cluster_gives_...)."""
+    spec = tiny()
+    payload, items = spec.payload(), [(v.run_id, v.values) for v in spec.variants()]
+    sweep_exec.warm_up({**payload, "set": {**payload["set"], "initial.theta": 9.0}}, items)  # invalid: no raise
+    client, cluster, n, _ = sw._dask_client(2, None, warm=lambda: sweep_exec.warm_up(payload, items))
+    try:
+        here = _loaded_kernels()
+        there = client.run(_loaded_kernels)  # (before any task)
+        assert here > 0 and list(there.values()) == [here, here]
+    finally:
+        client.close()
+        cluster.close()
+
+
+def test_tasks_are_awaited_on_their_clients_loop(monkeypatch):
+    """The driver waits for its tasks on its own client's event loop, also when another client was made after it in
+    this process (Dask's default client): on that one's loop the ends of the tasks were seen late (7 runs/s instead of
+    80 in the benchmark, which holds a local cluster and a scheduler's client at once)."""
+    import distributed
+
+    from gyro_sim.apps.sweep_tasks import run_adaptive, run_fixed
+
+    loops = []
+    real = distributed.as_completed
+
+    def spy(*a, **k):
+        loops.append(k.get("loop"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(distributed, "as_completed", spy)
+    spec = tiny(vary={"controller.period": "0.001:0.003:3"}, metrics={"th": "final(theta_deg)"})
+    payload, items = spec.payload(), [(v.run_id, v.values) for v in spec.variants()]
+    client, cluster, _, _ = sw._dask_client(1, None)
+    other = distributed.Client(cluster.scheduler_address)  # made last: the default client
+    try:
+        assert distributed.default_client() is other
+        rows: list = []
+        run_adaptive(client, sweep_exec.run_chunk, payload, items, rows.extend)
+        run_fixed(client, sweep_exec.run_chunk, payload, items, 2, rows.extend)
+        assert sorted(r["run_id"] for r in rows) == sorted(2 * [i[0] for i in items])
+        assert all(r["status"] == "ok" for r in rows) and loops == [client.loop, client.loop]
+    finally:
+        other.close()
+        client.close()
+        cluster.close()
+
+
 @pytest.fixture
 def dask_processes(tmp_path):
-    """A ``dask scheduler`` and ``dask worker --nworkers 2`` as separate processes, on 127.0.0.1 only; every
-    process group is ended (TERM, then KILL) whatever the test does."""
-    sched_file = tmp_path / "scheduler.json"
-    procs = []
+    """A ``dask scheduler`` and ``dask worker --nworkers 2`` as separate processes, on 127.0.0.1 only
+    (:func:`gyro_sim.apps.bench_sweep.scheduler_processes`: every process group is ended, TERM then KILL, whatever
+    the test does); yields the scheduler file."""
+    from gyro_sim.apps.bench_sweep import scheduler_processes
 
-    def start(args, name):
-        log = open(tmp_path / f"{name}.log", "w")
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", *args], stdout=log, stderr=subprocess.STDOUT,
-                                      stdin=subprocess.DEVNULL, start_new_session=True, cwd=tmp_path))
-        log.close()
-
-    try:
-        start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file",
-               str(sched_file), "--idle-timeout", "300s"], "scheduler")
-        deadline = time.monotonic() + 60
-        while not sched_file.is_file() and time.monotonic() < deadline:
-            assert procs[0].poll() is None, (tmp_path / "scheduler.log").read_text()
-            time.sleep(0.1)
-        assert sched_file.is_file(), (tmp_path / "scheduler.log").read_text()
-        start(["worker", "--scheduler-file", str(sched_file), "--host", "127.0.0.1", "--nworkers", "2",
-               "--nthreads", "1", "--no-dashboard", "--local-directory", str(tmp_path / "work"),
-               "--death-timeout", "60"], "workers")
-        yield sched_file, procs
-    finally:
-        for p in reversed(procs):
-            try:
-                os.killpg(p.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-        for p in reversed(procs):
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                pass
-            try:
-                os.killpg(p.pid, signal.SIGKILL)  # anything left in the group (nanny's workers)
-            except ProcessLookupError:
-                pass
-            p.wait()
+    with scheduler_processes(str(tmp_path), 2):
+        yield tmp_path / "scheduler.json"
 
 
 def test_scheduler_processes_give_the_local_numbers(reference, dask_processes):
     spec, serial, local = reference
-    sched_file, procs = dask_processes
+    sched_file = dask_processes
     address = json.loads(sched_file.read_text())["address"]
     assert address.startswith("tcp://127.0.0.1:")
     t0 = time.perf_counter()

@@ -9,17 +9,17 @@ cost, measured in one run.
   set-up and the kernels' cache). With ``baseline`` (a source tree of the code before, e.g. ``git archive`` of a
   commit) the same processes run that code (``PYTHONPATH``, from a folder of their own) interleaved with this
   one's, so before and after meet the same load.
-* sweep: :func:`gyro_sim.apps.sweep.measure` on a sweep of short runs (the default scene for 2 s, the control current
-  varied): runs/s in this process, on 1 and on all workers with one run per task and with tasks sized as they go
-  (``batch="auto"``, the default), the cost of a run inside a worker against in-process (wall and its thread's
-  CPU); and beside them two processes without Dask, each running half of the runs at once (the most 2 cores give).
+* sweep: :mod:`gyro_sim.apps.bench_sweep` (issue 32): runs/s of a sweep of short runs in this process, on 1 and 2
+  workers of a local cluster and of a cluster started as separate processes, the share of the CPU of every process
+  outside the runs, the whole command, and the gain of batching 1,000 Monte Carlo variants per task; beside them
+  :func:`gyro_sim.apps.bench_sweep.two_processes`, each running half of the runs at once without Dask (the most 2
+  cores give).
 
 Ratios within one run only: the machine is shared, its load (``/proc/loadavg``) is recorded before and after each
 part.
 """
 from __future__ import annotations
 
-import io
 import json
 import os
 import statistics
@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["STARTUP_CASES", "startup_times", "startup_part", "sweep_spec", "two_processes", "sweep_part",
+__all__ = ["STARTUP_CASES", "startup_times", "startup_part", "sweep_part",
            "headline", "markdown"]
 
 #: the first run's process: says when its first run is done (the parent's clock stops there), then the import, first
@@ -142,84 +142,11 @@ def startup_part(res, quick: bool = False, baseline: Optional[str] = None, say=p
 # ------------------------------------------------------------------------------------------
 # sweep scaling
 # ------------------------------------------------------------------------------------------
-def sweep_spec(runs: int, duration: float = 2.0):
-    """``runs`` variants of the default scene over ``duration`` s, the spin-up law's current 0.5 … 1.5 A."""
-    from gyro_sim.apps.sweep import spec_from_dict
+def sweep_part(res, quick: bool = False, runs: Optional[int] = None, mc: Optional[int] = None, say=print) -> None:
+    """Fill ``res.sweep``: :func:`gyro_sim.apps.bench_sweep.sweep_part` (issue 32's figures)."""
+    from gyro_sim.apps import bench_sweep
 
-    return spec_from_dict({"scene": "spinup_thin_shell", "set": {"duration": duration},
-                           "vary": {"controller.params.current": f"0.5:1.5:{runs}"},
-                           "metrics": {"spin": "final(spin)"}}, where="bench")
-
-
-def two_processes(spec, n: int = 2, repeats: int = 1) -> dict:
-    """``n`` processes without Dask, each running 1/n of the variants in a loop at once (after its warm-up): wall s
-    from the common start to the last end, runs/s (the fastest of ``repeats`` passes). What ``n`` cores give with no
-    task overhead at all."""
-    items = [(v.run_id, v.values) for v in spec.variants()]
-    parts = [items[i::n] for i in range(n)]
-    payload = spec.payload()
-    code = ("import json, sys, time\nfrom gyro_sim.apps.sweep import run_chunk\n"
-            "payload, items = json.loads(sys.stdin.readline())\nitems = [tuple(x) for x in items]\n"
-            "run_chunk(payload, items[:1])\nprint('ready', flush=True)\n"
-            "while sys.stdin.readline():\n"
-            "    t0 = time.time()\n    rows = run_chunk(payload, items)\n"
-            "    print(json.dumps({'t0': t0, 't1': time.time(), 'ok': sum(r['status'] == 'ok' for r in rows)}), "
-            "flush=True)\n")
-    with tempfile.TemporaryDirectory(prefix="gyro_two_") as cwd:
-        procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                  text=True, cwd=cwd) for _ in parts]
-        try:
-            for p, part in zip(procs, parts):
-                p.stdin.write(json.dumps([payload, part]) + "\n")
-                p.stdin.flush()
-            for p in procs:
-                assert p.stdout.readline().strip() == "ready"
-            passes = []
-            for _ in range(max(1, int(repeats))):
-                for p in procs:  # go
-                    p.stdin.write("\n")
-                    p.stdin.flush()
-                ends = [json.loads(p.stdout.readline()) for p in procs]
-                wall = max(e["t1"] for e in ends) - min(e["t0"] for e in ends)
-                passes.append({"processes": n, "wall": wall, "runs_per_s": len(items) / wall,
-                               "ok": sum(e["ok"] for e in ends)})
-        finally:
-            for p in procs:
-                p.stdin.close()
-                p.wait(timeout=60)
-    return max(passes, key=lambda o: o["runs_per_s"])
-
-
-#: what the sweep part times (gyro_sim.apps.sweep.MEASURE_CONFIGS): one run per task (the former default) and auto
-SWEEP_CONFIGS = ("one_worker", "all_workers", "one_worker_auto", "all_workers_auto")
-
-
-def sweep_part(res, quick: bool = False, runs: Optional[int] = None, say=print) -> None:
-    """Fill ``res.sweep``: :func:`gyro_sim.apps.sweep.measure` of :func:`sweep_spec` (128 runs of 2 s, the fastest of 3
-    passes of each; 48 runs, one pass in quick mode) on 2 workers (all cores if fewer), and :func:`two_processes` in
-    each of its rounds (while the cluster idles)."""
-    from gyro_sim.apps.sweep import measure
-
-    n = runs or (48 if quick else 128)
-    spec = sweep_spec(n)
-    workers = min(2, os.cpu_count() or 1)
-    load0 = _load()
-    text = io.StringIO()
-    repeats = 1 if quick else 3
-    # the two plain processes take their turn in every round of measure's passes (the same load meets both)
-    each = (lambda: two_processes(spec, workers)) if workers > 1 else None
-    out = measure(spec, workers=workers, noop_tasks=0 if quick else 200, stream=text, configs=SWEEP_CONFIGS,
-                  repeats=repeats, each_round=each)
-    two = max(out["rounds"], key=lambda o: o["runs_per_s"]) if each else None
-    row = {"runs": n, "duration": 2.0, "workers": workers, "measure": out, "two_processes": two, "repeats": repeats,
-           "load": f"{load0} → {_load()}"}
-    res.sweep.append(row)
-    for line in text.getvalue().splitlines():
-        say(f"[sweep] {line}")
-    if two:
-        say(f"[sweep] {workers} processes without Dask, half the runs each: {two['runs_per_s']:.2f} runs/s "
-            f"(x{two['runs_per_s'] / out['serial']['runs_per_s']:.2f} of one process)")
-    say(f"[sweep] load {row['load']}")
+    bench_sweep.sweep_part(res, quick, runs=runs, mc=mc, say=say)
 
 
 # ------------------------------------------------------------------------------------------
@@ -227,6 +154,8 @@ def sweep_part(res, quick: bool = False, runs: Optional[int] = None, say=print) 
 # ------------------------------------------------------------------------------------------
 def headline(res) -> list[str]:
     """The two parts' sentences for the headline."""
+    from gyro_sim.apps import bench_sweep
+
     out = []
     by = {(r["tree"], r["case"]): r for r in res.startup}
     for case, _ in STARTUP_CASES[1:]:
@@ -234,23 +163,14 @@ def headline(res) -> list[str]:
         if now:
             out.append(f"start-up, `{case}` as a new process: {now['min']:.3f} s"
                        + (f" (before: {before['min']:.3f} s, {before['min'] / now['min']:.2f}x)" if before else ""))
-    for row in res.sweep:
-        m, s = row["measure"], row["measure"]["serial"]
-        a1, a2 = m.get("one_worker_auto"), m.get("all_workers_auto")
-        two = row["two_processes"]
-        if a2:
-            out.append(f"sweep of {row['runs']} runs of {row['duration']:g} s: {s['runs_per_s']:.1f} runs/s in one "
-                       f"process, {a2['runs_per_s']:.1f} on {row['workers']} workers (x{a2['speedup']:.2f}"
-                       + (f"; one run per task: x{m['all_workers']['speedup']:.2f}" if "all_workers" in m else "")
-                       + (f"; {two['processes']} plain processes: x{two['runs_per_s'] / s['runs_per_s']:.2f}"
-                          if two else "") + ")"
-                       + (f"; a run in a worker costs {a1['run_cpu_ratio']:.2f}x its CPU in-process, "
-                          f"{a1['run_wall_ratio']:.2f}x its wall" if a1 else "") + f" (load {row['load']})")
+    out += [bench_sweep.headline(row) for row in res.sweep]
     return out
 
 
 def markdown(res) -> list[str]:
     """The two parts' sections of bench.md."""
+    from gyro_sim.apps import bench_sweep
+
     L: list = []
     if res.startup:
         L += ["## Start-up of a process (new processes, numba's cache warm; s wall)", "",
@@ -264,27 +184,5 @@ def markdown(res) -> list[str]:
               "the first run to the end of that run (the second run is timed inside only). first − again: what a "
               "first run pays besides its integration (numba's set-up, the kernels' cache).", ""]
     for row in res.sweep:
-        m, s = row["measure"], row["measure"]["serial"]
-        L += [f"## Sweep scaling ({row['runs']} runs of spinup_thin_shell over {row['duration']:g} s, "
-              f"{row['workers']} workers; the fastest of {row.get('repeats', 1)} passes each)", "",
-              "| how | tasks | runs/s | x one process | a run: wall ms (x in-process) | a run: CPU ms (x in-process) |",
-              "|---|---|---|---|---|---|",
-              f"| one process, no Dask | {row['runs']} | {s['runs_per_s']:.1f} | 1 | {s['run_wall'] * 1e3:.2f} | "
-              f"{s['run_cpu'] * 1e3:.2f} |"]
-        titles = {"one_worker": "1 worker, 1 run per task", "all_workers": f"{row['workers']} workers, 1 run per task",
-                  "batched": f"{row['workers']} workers, {m['batch']} runs per task",
-                  "one_worker_auto": "1 worker, auto batch", "all_workers_auto": f"{row['workers']} workers, auto batch"}
-        for k, title in titles.items():
-            if k in m:
-                o = m[k]
-                L.append(f"| {title} | {o['tasks']} | {o['runs_per_s']:.1f} | {o['speedup']:.2f} | "
-                         f"{o['run_wall'] * 1e3:.2f} ({o['run_wall_ratio']:.2f}) | "
-                         f"{o['run_cpu'] * 1e3:.2f} ({o['run_cpu_ratio']:.2f}) |")
-        two = row["two_processes"]
-        if two:
-            L.append(f"| {two['processes']} processes, no Dask, half each | {two['processes']} | "
-                     f"{two['runs_per_s']:.1f} | {two['runs_per_s'] / s['runs_per_s']:.2f} | | |")
-        L += ["", f"In-process: before the cluster {m['serial_before']['runs_per_s']:.1f} runs/s, after it "
-              f"{m['serial_after']['runs_per_s']:.1f} (the table: their mean). Cluster start and warm-up "
-              f"{m['startup']:.2f} s, not in the figures. Load {row['load']}.", ""]
+        L += bench_sweep.markdown(row)
     return L

@@ -10,14 +10,15 @@ format in ``docs/sweeps.md``)::
     gyro-sim sweep sweep_psi_rate                 # a built-in sweep file
     gyro-sim sweep sweep_psi_rate --scheduler tcp://127.0.0.1:8786
 
-Every variant is validated like a scene file before anything runs; a variant that does not
+Every variant is validated like a scene file before it runs (once, where it runs); a variant that does not
 validate, a run that raises or ends in a non-finite state is recorded (``status`` ``invalid`` /
 ``failed`` with the reason) and the sweep goes on. Runs are independent Dask tasks on a local
 cluster (all cores by default, bound to 127.0.0.1) or on an existing scheduler (``--scheduler``);
 ``--workers 0`` runs them in this process without Dask. Results go to a Parquet table (one row per
 variant: the varied values, the metrics, optional time series, the package version) keyed by a
 hash of (scene, fixed overrides, variant values, metrics); a sweep run again skips what its file
-already holds, and a hard stop loses at most the runs in flight (a journal beside the file).
+already holds, and a hard stop loses at most the runs in flight and those of the last second (a journal beside
+the file, written in batches). Each row records the seed of its random draws.
 
 A task runs several variants one after the other in the worker, so the per-task costs (scheduling
 round trip, (de)serialisation, result hand-back) are paid once per task: by default (``--batch auto``)

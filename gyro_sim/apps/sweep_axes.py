@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-_FIXED_COLUMNS = ("run_id", "index", "sample", "status", "error", "wall_time_run", "worker", "gyro_sim_version")
+_FIXED_COLUMNS = ("run_id", "index", "sample", "seed", "status", "error", "wall_time_run", "worker", "gyro_sim_version")
 
 
 class SweepError(ValueError):

@@ -4,7 +4,6 @@ dask.distributed and tqdm are imported only where used.
 """
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -20,7 +19,8 @@ import numpy as np
 
 from gyro_sim import __version__
 from gyro_sim.apps.sweep_axes import SweepError
-from gyro_sim.apps.sweep_io import _flat_row, _journal_path, _read_journal, _row_from_flat, read_results, write_results
+from gyro_sim.apps.sweep_io import (Journal, _flat_row, _journal_path, _read_journal, _row_from_flat, read_results,
+                                  write_results)
 from gyro_sim.apps.sweep_metrics import _quantity, parse_metric
 from gyro_sim.apps.sweep_spec import SweepSpec, _scene_for
 from gyro_sim.scenes.scene import SceneError
@@ -56,12 +56,18 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
     """Run the variants ``items`` = [(run_id, values), ...] of a sweep ``payload`` (SweepSpec.payload)
     one after the other; returns one row per item: run_id, status ('ok' | 'invalid' | 'failed'),
     error, metrics {name: float}, series {quantity: [..]}, wall_time_run (s), cpu_time_run (s of this
-    thread's CPU), worker. Never raises for a bad variant or a failed run: the reason goes in ``error``."""
+    thread's CPU), sim_cpu (s of this thread's CPU in the run itself, ``gyro_sim.run``), worker. Never raises for a
+    bad variant or a failed run: the reason goes in ``error``. Each variant's scene is built (and validated) once,
+    here; the run is reduced to the requested metrics (and series) here: the row is all that leaves the worker."""
+    return list(chunk_rows(payload, items))
+
+
+def chunk_rows(payload: dict, items: Sequence[tuple]):
+    """:func:`run_chunk`'s rows one at a time, as each run ends (the metrics parsed, the worker named once)."""
     metrics = [parse_metric(m) for m in payload["metrics"]]
     series = payload.get("series") or []
     npts = int(payload.get("series_points", 1000))
     label = _worker_label()
-    rows = []
     for run_id, values in items:
         w0, c0 = time.perf_counter(), time.thread_time()
         row = {"run_id": run_id, "status": "ok", "error": None, "metrics": {}, "series": {}, "worker": label}
@@ -70,11 +76,13 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
                                payload.get("name", "scene"))
         except SceneError as e:
             row.update(status="invalid", error=str(e), wall_time_run=time.perf_counter() - w0,
-                       cpu_time_run=time.thread_time() - c0)
-            rows.append(row)
+                       cpu_time_run=time.thread_time() - c0, sim_cpu=0.0)
+            yield row
             continue
+        s0 = time.thread_time()
         try:
             res = _run_scene(scene) if any(m.needs_run for m in metrics) or series else None
+            row["sim_cpu"] = time.thread_time() - s0
             if res is not None:
                 # (q is NaN by design in a run without attitude: output.attitude false, isotropic rotor)
                 finite = np.isfinite(res.L).all(axis=1) & (np.isfinite(res.q).all(axis=1) | (not res.attitude))
@@ -92,11 +100,10 @@ def run_chunk(payload: dict, items: Sequence[tuple]) -> list:
                 row["series"] = {"t": _decimate(res.t, npts), **{q: _decimate(_quantity(res, q), npts) for q in series}}
         except Exception as e:  # noqa: BLE001 - a failed run is a result
             msg = str(e) if isinstance(e, (FloatingPointError, RuntimeError)) and str(e) else f"{type(e).__name__}: {e}"
-            row.update(status="failed", error=msg, metrics={}, series={})
+            row.update(status="failed", error=msg, metrics={}, series={}, sim_cpu=time.thread_time() - s0)
         row["wall_time_run"] = time.perf_counter() - w0
         row["cpu_time_run"] = time.thread_time() - c0  # (this thread's CPU s: measure() compares it, not stored)
-        rows.append(row)
-    return rows
+        yield row
 
 
 def _noop(x):
@@ -112,6 +119,7 @@ class SweepResult:
     rows: list  # flat rows (table columns), by variant index
     n_total: int = 0
     n_run: int = 0  # run now
+    sim_cpu: float = 0.0  # s of CPU in the runs themselves (gyro_sim.run, in whichever process ran them), run now
     n_skipped: int = 0  # already in the results file
     n_invalid: int = 0
     n_failed: int = 0  # failed runs (all, this time or before)
@@ -128,10 +136,16 @@ class SweepResult:
         return self.n_run / self.wall if self.wall > 0 else math.nan
 
 
-class _Progress:
-    """Runs done / failed and the time left (tqdm on stderr)."""
+#: the progress bar's line (tqdm): runs done of all, failures, runs/s and the time left
+PROGRESS_FORMAT = ("{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} runs{postfix} "
+                   "[{elapsed}, {rate_fmt}, ETA {remaining}]")
 
-    def __init__(self, total: int, initial: int, name: str, enabled: bool):
+
+class _Progress:
+    """Runs done / failed, runs/s and the time left (tqdm on stderr, :data:`PROGRESS_FORMAT`); ``stream``: another
+    file (tests)."""
+
+    def __init__(self, total: int, initial: int, name: str, enabled: bool, stream=None):
         self.failed = 0
         self.bar = None
         if enabled and total > initial:
@@ -139,23 +153,50 @@ class _Progress:
                 from tqdm import tqdm
             except ImportError:  # pragma: no cover - the sweep extra brings it
                 return
-            self.bar = tqdm(total=total, initial=initial, desc=f"sweep {name}", unit="run", file=sys.stderr,
-                            mininterval=0.2 if sys.stderr.isatty() else 5.0, dynamic_ncols=True, leave=True)
+            stream = stream or sys.stderr
+            tty = hasattr(stream, "isatty") and stream.isatty()
+            self.bar = tqdm(total=total, initial=initial, desc=f"sweep {name}", unit=" runs", file=stream,
+                            mininterval=0.2 if tty else 5.0, dynamic_ncols=True, leave=True,
+                            bar_format=PROGRESS_FORMAT, postfix="")
 
-    def update(self, failed: bool) -> None:
-        if failed:
-            self.failed += 1
-        if self.bar is not None:
-            self.bar.set_postfix_str(f"failed={self.failed}", refresh=False)
-            self.bar.update(1)
+    def update(self, rows: Sequence[dict]) -> None:
+        """Count a batch of finished rows (one refresh for all of them)."""
+        self.failed += sum(1 for r in rows if r["status"] != "ok")
+        if self.bar is not None and rows:
+            self.bar.set_postfix_str(f", {self.failed} failed" if self.failed else "", refresh=False)
+            self.bar.update(len(rows))
 
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
 
 
-def _dask_client(workers: Optional[int], scheduler: Optional[str]):
-    """(client, cluster or None, n_workers, mode)."""
+#: s of simulated time of :func:`warm_up`'s run (0.02 s left a first full run of the default scene 3x slower: not
+#: every kernel is called in its first steps)
+WARM_SECONDS = 0.1
+
+
+def warm_up(payload: dict, items: Sequence[tuple]) -> None:
+    """Load in this process the compiled kernels the sweep's runs and metrics use: the first variant's row computed
+    over :data:`WARM_SECONDS` of simulated time (or less, if it is shorter), then dropped. Before a local cluster
+    starts its workers by ``fork`` (:data:`gyro_sim.apps.sweep_tasks.START_METHOD`) they all inherit them instead of
+    loading them each. Never raises for a bad variant: one that does not validate or fails here fails where it runs,
+    with its message."""
+    if not items:
+        return
+    run_id, values = items[0]
+    try:
+        scene = _scene_for(payload["scene"], payload.get("set") or {}, values, payload.get("where", ""),
+                           payload.get("name", "scene"))
+        short = {**values, "duration": min(float(scene.duration), WARM_SECONDS)}
+    except Exception:  # noqa: BLE001 - best effort: the workers then load the kernels themselves
+        return
+    run_chunk(payload, [(run_id, short)])
+
+
+def _dask_client(workers: Optional[int], scheduler: Optional[str], warm: Optional[Callable] = None):
+    """(client, cluster or None, n_workers, mode). ``warm()``: called in this process before a local cluster's workers
+    start (with ``fork`` they inherit what it loaded; see :func:`warm_up`)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -182,6 +223,8 @@ def _dask_client(workers: Optional[int], scheduler: Optional[str]):
     from gyro_sim.apps.sweep_tasks import WORKER_CONFIG
 
     n = int(workers) if workers else (os.cpu_count() or 1)
+    if warm is not None and WORKER_CONFIG["distributed.worker.multiprocessing-method"] == "fork":
+        warm()
     with warnings.catch_warnings(), dask.config.set(WORKER_CONFIG):  # (the nannies pass it to their workers)
         # the scheduler's health endpoint moves off 8787 if that is taken
         warnings.filterwarnings("ignore", message=r"Port \d+ is already in use")
@@ -209,8 +252,8 @@ def _execute(payload: dict, items: list, client, batch, on_rows: Callable, worke
     ``batch`` variants per task, or tasks sized as they are sent (``"auto"``, :func:`gyro_sim.sweep_tasks.
     run_adaptive`; returns its sizer)."""
     if client is None:
-        for it in items:
-            on_rows(run_chunk(payload, [it]))
+        for row in chunk_rows(payload, items):
+            on_rows([row])
         return None
     from gyro_sim.apps.sweep_tasks import run_adaptive, run_fixed
 
@@ -224,10 +267,11 @@ def _execute(payload: dict, items: list, client, batch, on_rows: Callable, worke
 def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Optional[int] = None,
               scheduler: Optional[str] = None, batch="auto", resume: bool = True, retry_failed: bool = False,
               progress: bool = True) -> SweepResult:
-    """Run every variant of ``spec``: validated first, then as Dask tasks (``workers`` = 0: in this
-    process), skipping the runs ``out`` already holds. Writes ``out`` (Parquet) if given. ``batch``: variants
+    """Run every variant of ``spec`` as Dask tasks (``workers`` = 0: in this process), each validated where it runs
+    (an invalid one is a row of status ``invalid``), skipping the runs ``out`` already holds. Writes ``out`` (Parquet)
+    if given, its journal in batches as the runs end (:class:`gyro_sim.apps.sweep_io.Journal`). ``batch``: variants
     per task, or ``"auto"``: each task sized as it is sent (:mod:`gyro_sim.sweep_tasks`); the results do not
-    depend on it."""
+    depend on it. A local cluster's workers start from this process after :func:`warm_up` (``fork``, on Linux)."""
     t_start = time.perf_counter()
     from gyro_sim.common.extras import MissingExtra
 
@@ -243,45 +287,34 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
         if out.is_file():
             old, _ = read_results(out)
             for flat in old:
-                if flat.get("run_id") in by_id and flat.get("status") != "invalid":
+                if flat.get("run_id") in by_id:
                     done[flat["run_id"]] = _row_from_flat(spec, flat)
         for r in _read_journal(_journal_path(out)):
             if r.get("run_id") in by_id:
                 done[r["run_id"]] = r
-        if retry_failed:
-            done = {k: r for k, r in done.items() if r["status"] == "ok"}
+        # (invalid variants are validated again: a changed scene loader may accept them)
+        done = {k: r for k, r in done.items() if r["status"] == "ok" or (r["status"] == "failed" and not retry_failed)}
     elif out is not None:
         _journal_path(out).unlink(missing_ok=True)
     results: dict = dict(done)
-    # --- validate every variant before anything runs
-    todo = []
-    n_invalid = 0
-    for v in variants:
-        if v.run_id in done:
-            continue
-        try:
-            spec.scene_for(v.values)
-        except SceneError as e:
-            results[v.run_id] = {"run_id": v.run_id, "status": "invalid", "error": str(e), "metrics": {}, "series": {},
-                                 "wall_time_run": 0.0, "worker": ""}
-            n_invalid += 1
-            continue
-        todo.append(v)
-    res = SweepResult(spec, [], n_total=len(variants), n_skipped=len(done), n_invalid=n_invalid, out=out)
+    # each variant's scene is built (and validated) once, where it runs (run_chunk): an invalid one comes back as a
+    # row of status "invalid" with the loader's message, before any integration of its own
+    todo = [v for v in variants if v.run_id not in done]
+    res = SweepResult(spec, [], n_total=len(variants), n_skipped=len(done), out=out)
     bar = _Progress(len(variants), len(variants) - len(todo), spec.name, progress)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-    journal = open(_journal_path(out), "a", encoding="utf-8") if out is not None and todo else None
+    journal = Journal(_journal_path(out)) if out is not None and todo else None
 
     def on_rows(rows):
         for r in rows:
             r["gyro_sim_version"] = __version__
             results[r["run_id"]] = r
-            if journal is not None:
-                journal.write(json.dumps(r) + "\n")
-                journal.flush()
-            res.n_run += 1
-            bar.update(r["status"] != "ok")
+        if journal is not None:
+            journal.add(rows)
+        res.n_run += sum(1 for r in rows if r["status"] != "invalid")
+        res.sim_cpu += sum(r.get("sim_cpu") or 0.0 for r in rows)
+        bar.update(rows)
 
     client = cluster = None
     try:
@@ -293,7 +326,8 @@ def run_sweep(spec: SweepSpec, out: Optional[str | Path] = None, workers: Option
                 res.startup = 0.0
             else:
                 t0 = time.perf_counter()
-                client, cluster, res.workers, res.mode = _dask_client(workers, scheduler)
+                client, cluster, res.workers, res.mode = _dask_client(workers, scheduler,
+                                                                      warm=lambda: warm_up(payload, items))
                 res.startup = time.perf_counter() - t0
             t0 = time.perf_counter()
             sizer = _execute(payload, items, client, batch, on_rows)

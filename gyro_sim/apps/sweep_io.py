@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from pathlib import Path
 
 from gyro_sim import __version__
@@ -13,6 +14,8 @@ from gyro_sim.apps.sweep_axes import SweepError, _is_number
 from gyro_sim.apps.sweep_spec import SweepSpec, Variant
 
 _META_KEY = b"gyro_sim.sweep"
+#: s between two writes of the journal: a hard stop (kill, power) loses at most the runs of the last JOURNAL_SECONDS
+JOURNAL_SECONDS = 1.0
 
 
 # ------------------------------------------------------------------------------------------
@@ -22,8 +25,44 @@ def _journal_path(out: Path) -> Path:
     return out.with_name(out.name + ".journal.jsonl")
 
 
+class Journal:
+    """The runs a sweep has finished, appended to ``FILE.journal.jsonl`` (one JSON row a line) in batches: the rows
+    wait in memory and go to the file in one write and one flush when :data:`JOURNAL_SECONDS` have passed since the
+    last write (``seconds``), and at :meth:`close` (also on Ctrl-C). A line per run and a flush per run cost the
+    sweep's client a system call per run; a hard stop now loses at most the last ``seconds`` of runs."""
+
+    def __init__(self, path: Path, seconds: float | None = None):
+        self.path = Path(path)
+        self.seconds = JOURNAL_SECONDS if seconds is None else float(seconds)
+        self.pending: list = []
+        self.writes = 0  # writes to the file so far
+        self._file = open(self.path, "a", encoding="utf-8")
+        self._last = time.monotonic()
+
+    def add(self, rows) -> None:
+        self.pending.extend(json.dumps(r) + "\n" for r in rows)
+        if self.pending and time.monotonic() - self._last >= self.seconds:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.pending:
+            self._file.write("".join(self.pending))
+            self._file.flush()
+            self.pending.clear()
+            self.writes += 1
+        self._last = time.monotonic()
+
+    def close(self) -> None:
+        try:
+            self.flush()
+        finally:
+            self._file.close()
+
+
 def _flat_row(spec: SweepSpec, v: Variant, r: dict) -> dict:
-    row = {"run_id": v.run_id, "index": v.index, "sample": v.sample, "status": r["status"], "error": r.get("error"),
+    # seed: that of the variant's random draws (RandomVar.draw(seed, sample)), None where it draws nothing
+    row = {"run_id": v.run_id, "index": v.index, "sample": v.sample,
+           "seed": int(spec.seed) if v.sample is not None else None, "status": r["status"], "error": r.get("error"),
            "wall_time_run": float(r.get("wall_time_run") or 0.0), "worker": r.get("worker", ""),
            "gyro_sim_version": r.get("gyro_sim_version", __version__)}
     row.update(v.values)
@@ -62,7 +101,7 @@ def write_results(path: Path, rows: list, meta: dict) -> None:
     arrays = {}
     for k in keys:
         vals = [r.get(k) for r in rows]
-        if k in ("index", "sample"):
+        if k in ("index", "sample", "seed"):
             arrays[k] = pa.array(vals, type=pa.int64())
         elif k in ("run_id", "status", "error", "worker", "gyro_sim_version"):
             arrays[k] = pa.array(vals, type=pa.string())

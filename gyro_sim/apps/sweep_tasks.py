@@ -22,17 +22,33 @@ from __future__ import annotations
 
 import math
 import statistics
+import sys
 from typing import Callable, Optional, Sequence
 
-__all__ = ["TASK_SECONDS", "TASKS_AHEAD", "WORKER_CONFIG", "TaskSizer", "worker_slots", "failed_rows",
-           "run_fixed", "run_adaptive"]
+__all__ = ["TASK_SECONDS", "TASKS_AHEAD", "WORKER_THREADS_ENV", "START_METHOD", "WORKER_CONFIG", "TaskSizer",
+           "worker_slots", "failed_rows", "run_fixed", "run_adaptive"]
 
 #: s of runs a task aims at: long against the 1.5–7 ms each task costs, short enough for an even finish
 TASK_SECONDS = 0.25
 #: tasks kept in flight per worker thread (one running, one queued: no thread waits for the next task)
 TASKS_AHEAD = 2
-#: the Dask settings of the local cluster's workers (dask.config keys)
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+#: the thread pools of a worker process, one thread each: a worker runs one variant at a time on one core, and a
+#: pool of threads per worker (numba's threading layer, OpenMP, BLAS) would have the workers fight over the cores
+WORKER_THREADS_ENV = {"NUMBA_NUM_THREADS": 1, "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
+#: how the local cluster starts its worker processes: ``fork`` on Linux, where a worker is then a copy of this
+#: process with gyro_sim imported and the kernels the sweep uses loaded (:func:`gyro_sim.apps.sweep_exec.warm_up`):
+#: 0.1 s of CPU and 0.4 s to start 2 workers, against 2.0 s of CPU and 4.4 s with ``spawn``, where each worker
+#: imports distributed and gyro_sim and loads the kernels anew (0.75 s) — more than 128 runs of the default scene
+#: cost. Elsewhere (macOS: fork is unsafe with its system libraries; Windows: no fork) Dask's default, ``spawn``.
+START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"
+#: the Dask settings of the local cluster's workers (dask.config keys; the environment is set before the worker
+#: process starts, so numba and BLAS read it at import where the worker imports them)
+#: (the system monitor, every 0.5 s, and the event loop's tick, every 20 ms, kept an idle cluster of 2 workers at
+#: 5 % of a core; every 5 s and 0.5 s, at 2 %: they feed the dashboard, which the local cluster does not have)
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
+                 "distributed.admin.system-monitor.interval": "5s", "distributed.admin.tick.interval": "500ms",
+                 "distributed.worker.multiprocessing-method": START_METHOD,
+                 "distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536, **WORKER_THREADS_ENV}}
 #: run times (s) the sizer keeps (the median of the latest)
 _KEEP = 256
 
@@ -102,7 +118,7 @@ def run_fixed(client, fn: Callable, payload, items: list, batch: int, on_rows: C
     futs = client.map(fn, [payload] * len(chunks), chunks, pure=False, **_placement(worker_addrs))
     index = {f.key: ch for f, ch in zip(futs, chunks)}
     try:
-        for fut in as_completed(futs):
+        for fut in as_completed(futs, loop=client.loop):  # (this client's loop: see run_adaptive)
             try:
                 rows = fut.result()
             except Exception as e:  # noqa: BLE001 - e.g. a worker that died (KilledWorker)
@@ -125,7 +141,9 @@ def run_adaptive(client, fn: Callable, payload, items: list, on_rows: Callable,
     sizer = sizer or TaskSizer(worker_slots(client, worker_addrs), task_seconds)
     place = _placement(worker_addrs)
     pending: dict = {}
-    done = as_completed()
+    # this client's event loop, not the default client's (the latest made in this process): on another client's
+    # loop the futures' ends were seen late — 7 runs/s instead of 80 with a second client open
+    done = as_completed(loop=client.loop)
     sent = 0
 
     def send() -> None:
