@@ -162,23 +162,9 @@ def nonlinear_part(s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
 
 
 @njit(cache=True, inline="always")
-def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
-    """F = right-hand side of the state without the linear mode decay −e_n/τ_n, for a unit quaternion y[3:7].
-
-    ``cs``, ``sn``: cos(ω_p s), sin(ω_p s) of each phasor (the steppers get them by angle addition
-    from one evaluation per step: see :func:`stage_trig`).
-
-    F[0:3] = N (case, N·m) = (R m_b) × B  with m_b = c (Σ w_n e_n − T_tail dB_b/dt)   [physics.md §3]
-    F[3:7] = ½ q ⊗ (0, Ω_b),  Ω_b = J⁻¹ Rᵀ L
-    F[7+3n+j] = −(dB_b/dt)_j,  dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
-    ``eff`` (:mod:`gyro_sim.effects`): with eff[ON] ≠ 0 the effects change Ω_b, add torques, replace
-    m_b by the magnetizable body's and give the damper's states F[7+3nm:]. ``work`` (length ≥ 25)
-    receives Ω_b in work[12:15]. Written on scalars: array views in the hot path cost about 3×
-    (measured by the benchmark).
-    """
-    has_eff = eff[ON] != 0.0
-    mag = has_eff and eff[MAG] != 0.0
-    # field and its rate (case frame)
+def _field_and_rates(cs, sn, Bre, Bim, om, mag):
+    """The field B (T), its rate dB/dt (T/s) and, where ``mag``, its second derivative (T/s², else 0) in the case
+    frame from the phasors at the phases cs, sn: 9 scalars (B, dB/dt, d²B/dt²)."""
     Bx = By = Bz = 0.0
     dBx = dBy = dBz = 0.0
     ddx = ddy = ddz = 0.0
@@ -199,6 +185,55 @@ def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
             ddx -= o2 * bx
             ddy -= o2 * by
             ddz -= o2 * bz
+    return Bx, By, Bz, dBx, dBy, dBz, ddx, ddy, ddz
+
+
+@njit(cache=True, inline="always")
+def _quaternion_rate(q0, q1, q2, q3, Ox, Oy, Oz, F):
+    """F[3:7] = dq/dt = ½ q ⊗ (0, Ω_b): the kinematics of the stage quaternion itself (Ω_b in rad/s, body)."""
+    F[3] = -0.5 * (q1 * Ox + q2 * Oy + q3 * Oz)
+    F[4] = 0.5 * (q0 * Ox + q2 * Oz - q3 * Oy)
+    F[5] = 0.5 * (q0 * Oy + q3 * Ox - q1 * Oz)
+    F[6] = 0.5 * (q0 * Oz + q1 * Oy - q2 * Ox)
+
+
+@njit(cache=True, inline="always")
+def _eddy_moment(y, w, tail, nm, dbx, dby, dbz, F):
+    """The eddy moment over c, Σ w_n e_n − T_tail dB_b/dt (body frame, T; times c_m it is A·m²), and each
+    mode's forcing F[7+3n:10+3n] = −dB_b/dt (T/s; the decay −e_n/τ_n is the linear part)."""
+    mx = -tail * dbx
+    my = -tail * dby
+    mz = -tail * dbz
+    for n in range(nm):
+        k = 7 + 3 * n
+        mx += w[n] * y[k]
+        my += w[n] * y[k + 1]
+        mz += w[n] * y[k + 2]
+        F[k] = -dbx
+        F[k + 1] = -dby
+        F[k + 2] = -dbz
+    return mx, my, mz
+
+
+@njit(cache=True, inline="always")
+def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work, eff):
+    """F = right-hand side of the state without the linear mode decay −e_n/τ_n, for a unit quaternion y[3:7].
+
+    ``cs``, ``sn``: cos(ω_p s), sin(ω_p s) of each phasor (the steppers get them by angle addition
+    from one evaluation per step: see :func:`stage_trig`).
+
+    F[0:3] = N (case, N·m) = (R m_b) × B  with m_b = c (Σ w_n e_n − T_tail dB_b/dt)   [physics.md §3]
+    F[3:7] = ½ q ⊗ (0, Ω_b),  Ω_b = J⁻¹ Rᵀ L
+    F[7+3n+j] = −(dB_b/dt)_j,  dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
+    ``eff`` (:mod:`gyro_sim.effects`): with eff[ON] ≠ 0 the effects change Ω_b, add torques, replace
+    m_b by the magnetizable body's and give the damper's states F[7+3nm:]. ``work`` (length ≥ 25)
+    receives Ω_b in work[12:15]. Written on scalars: array views in the hot path cost about 3×
+    (measured by the benchmark).
+    """
+    has_eff = eff[ON] != 0.0
+    mag = has_eff and eff[MAG] != 0.0
+    # field and its rate (case frame)
+    Bx, By, Bz, dBx, dBy, dBz, ddx, ddy, ddz = _field_and_rates(cs, sn, Bre, Bim, om, mag)
     # q is a unit quaternion (the steppers' stage attitudes are q_n ⊗ exp(u));
     # Rᵀ is the conjugate's rotation
     q0, q1, q2, q3 = y[3], y[4], y[5], y[6]
@@ -216,11 +251,7 @@ def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
     work[12] = Ox
     work[13] = Oy
     work[14] = Oz
-    # quaternion kinematics dq/dt = ½ q ⊗ (0, Ω_b) of the stage quaternion itself
-    F[3] = -0.5 * (q1 * Ox + q2 * Oy + q3 * Oz)
-    F[4] = 0.5 * (q0 * Ox + q2 * Oz - q3 * Oy)
-    F[5] = 0.5 * (q0 * Oy + q3 * Ox - q1 * Oz)
-    F[6] = 0.5 * (q0 * Oz + q1 * Oy - q2 * Ox)
+    _quaternion_rate(q0, q1, q2, q3, Ox, Oy, Oz, F)
     for i in range(k0, F.shape[0]):  # extra states: the damper writes its own below
         F[i] = 0.0
     if c_m == 0.0 and not mag:
@@ -254,17 +285,7 @@ def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
             mx, my, mz = magnetizable_moment(eff, Bbx, Bby, Bbz, dbx, dby, dbz, ax, ay, az)
             mcx, mcy, mcz = _rotl(w0, x0, y0, z0, mx, my, mz)
         else:
-            mx = -tail * dbx
-            my = -tail * dby
-            mz = -tail * dbz
-            for n in range(nm):
-                k = 7 + 3 * n
-                mx += w[n] * y[k]
-                my += w[n] * y[k + 1]
-                mz += w[n] * y[k + 2]
-                F[k] = -dbx
-                F[k + 1] = -dby
-                F[k + 2] = -dbz
+            mx, my, mz = _eddy_moment(y, w, tail, nm, dbx, dby, dbz, F)
             mcx, mcy, mcz = _rotl(w0, x0, y0, z0, c_m * mx, c_m * my, c_m * mz)
         # N = m × B (case frame)
         F[0] = mcy * Bz - mcz * By
@@ -284,20 +305,11 @@ def nonlinear_part_at(cs, sn, s, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
 
 @njit(cache=True, inline="always")
 def nonlinear_part_plain(cs, sn, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, work):
-    """:func:`nonlinear_part_at` without the effects (``eff`` off), the same arithmetic: what a stepper that never
-    runs with an effect on (frozen flow, quasi-static flow) records as its output torque. Compiling the effects'
-    code into every output kernel cost about 1.7 s of the default scene's first compile (issue 31)."""
-    Bx = By = Bz = 0.0
-    dBx = dBy = dBz = 0.0
-    for p in range(om.shape[0]):
-        c = cs[p]
-        si = sn[p]
-        Bx += Bre[p, 0] * c + Bim[p, 0] * si
-        By += Bre[p, 1] * c + Bim[p, 1] * si
-        Bz += Bre[p, 2] * c + Bim[p, 2] * si
-        dBx += om[p] * (Bim[p, 0] * c - Bre[p, 0] * si)
-        dBy += om[p] * (Bim[p, 1] * c - Bre[p, 1] * si)
-        dBz += om[p] * (Bim[p, 2] * c - Bre[p, 2] * si)
+    """:func:`nonlinear_part_at` without the effects (``eff`` off), the same arithmetic (the same pieces:
+    :func:`_field_and_rates`, :func:`_quaternion_rate`, :func:`_eddy_moment`): what a stepper that never runs with an
+    effect on (frozen flow, quasi-static flow) records as its output torque. The effects' code compiled into the
+    output kernel cost 1.7 s of the default scene's first compile (issue 31)."""
+    Bx, By, Bz, dBx, dBy, dBz, _, _, _ = _field_and_rates(cs, sn, Bre, Bim, om, False)
     q0, q1, q2, q3 = y[3], y[4], y[5], y[6]
     Lbx, Lby, Lbz = _rotl(q0, -q1, -q2, -q3, y[0], y[1], y[2])
     k0 = 7 + 3 * nm
@@ -307,10 +319,7 @@ def nonlinear_part_plain(cs, sn, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
     work[12] = Ox
     work[13] = Oy
     work[14] = Oz
-    F[3] = -0.5 * (q1 * Ox + q2 * Oy + q3 * Oz)
-    F[4] = 0.5 * (q0 * Ox + q2 * Oz - q3 * Oy)
-    F[5] = 0.5 * (q0 * Oy + q3 * Ox - q1 * Oz)
-    F[6] = 0.5 * (q0 * Oz + q1 * Oy - q2 * Ox)
+    _quaternion_rate(q0, q1, q2, q3, Ox, Oy, Oz, F)
     for i in range(k0, F.shape[0]):
         F[i] = 0.0
     if c_m == 0.0:
@@ -323,17 +332,7 @@ def nonlinear_part_plain(cs, sn, y, Bre, Bim, om, Jinv, c_m, w, tail, nm, F, wor
     dbx -= Oy * Bbz - Oz * Bby  # dB_b/dt = Rᵀ dB/dt − Ω_b × B_b
     dby -= Oz * Bbx - Ox * Bbz
     dbz -= Ox * Bby - Oy * Bbx
-    mx = -tail * dbx
-    my = -tail * dby
-    mz = -tail * dbz
-    for n in range(nm):
-        k = 7 + 3 * n
-        mx += w[n] * y[k]
-        my += w[n] * y[k + 1]
-        mz += w[n] * y[k + 2]
-        F[k] = -dbx
-        F[k + 1] = -dby
-        F[k + 2] = -dbz
+    mx, my, mz = _eddy_moment(y, w, tail, nm, dbx, dby, dbz, F)
     mcx, mcy, mcz = _rotl(q0, q1, q2, q3, c_m * mx, c_m * my, c_m * mz)
     F[0] = mcy * Bz - mcz * By  # N = m × B (case frame)
     F[1] = mcz * Bx - mcx * Bz
