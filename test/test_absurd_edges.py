@@ -33,7 +33,7 @@ from gyro_sim.io.bag_format import RESERVE_NAME
 from gyro_sim.io.bag_repair import recover_bag
 from gyro_sim.io.recording import BagRecorder, bag_info, read_bag, record_result, scene_text
 from gyro_sim.scenes.scene import SceneError, load_scene
-from test_nothing_lost import _check_bag, _mcap, _start_run, _wait_for_chunks
+from test_nothing_lost import _check_bag, _mcap, _recording_run, _wait_for_chunks
 
 LONG = "a" * 300  # a path component no Linux file system takes (NAME_MAX 255)
 
@@ -164,17 +164,12 @@ def test_a_burst_of_ctrl_c_ends_with_one_line_and_a_readable_bag(tmp_path):
     KeyboardInterrupt traceback. Now: the bag is closed with the run up to the first signal, the summary is skipped
     in one line, status 130."""
     bag = tmp_path / "bag"
-    proc = _start_run(tmp_path, bag)
-    try:
+    with _recording_run(tmp_path, bag) as proc:
         _wait_for_chunks(proc, _mcap(bag), 200_000)
         for _ in range(5):
             proc.send_signal(signal.SIGINT)
             time.sleep(0.02)
         out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     _no_traceback(proc, out, err)
     info, _ = _check_bag(bag)
     assert info["end_reason"] == "interrupted: signal SIGINT"
@@ -213,16 +208,11 @@ def test_the_space_reserve_does_not_outlive_a_killed_recorder(tmp_path, capsys):
     """kill -9 left the 4 MiB `.gyro_sim_reserve` in the bag folder, and `bag recover` left it there too. Now the
     reserve has no name (the kernel frees it with the process); recover removes one an older version left."""
     bag = tmp_path / "bag"
-    proc = _start_run(tmp_path, bag)
-    try:
+    with _recording_run(tmp_path, bag) as proc:
         _wait_for_chunks(proc, _mcap(bag), 200_000)
         assert os.listdir(bag) == [_mcap(bag).name]  # (while it records, too)
         proc.kill()
         proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert os.listdir(bag) == [_mcap(bag).name]
     (bag / RESERVE_NAME).write_bytes(bytes(4096))  # (what an older recorder left)
     assert cli.main(["bag", "recover", str(bag)]) == 0

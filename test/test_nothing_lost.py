@@ -3,6 +3,7 @@ memory flat. Signals go to real `gyro-sim run` processes; the full and read-only
 private mount namespace (`unshare -m`, skipped with the reason where it cannot be made)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -52,6 +53,19 @@ def _start_run(tmp_path: Path, bag: Path, duration: float = 100000.0) -> subproc
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
 
 
+@contextlib.contextmanager
+def _recording_run(tmp_path: Path, bag: Path):
+    """:func:`_start_run` for the ``with`` block; the process is killed at its end if it still runs (a failed
+    assertion, a test that ends it some other way)."""
+    proc = _start_run(tmp_path, bag)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 def _wait_for_chunks(proc: subprocess.Popen, path: Path, size: int, limit: float = 120.0) -> None:
     """Until the bag's MCAP file has grown past ``size`` bytes (chunks written out while the run goes on)."""
     end = time.monotonic() + limit  # a guard against a hang only
@@ -84,15 +98,10 @@ def test_signal_mid_run_in_process_leaves_the_bag_and_its_summary(tmp_path, sig,
     run). Now: the bag holds the run up to the signal, says so, its duration is the time it covers, the summary is
     printed and the status is 128 + the signal."""
     bag = tmp_path / "bag"
-    proc = _start_run(tmp_path, bag)
-    try:
+    with _recording_run(tmp_path, bag) as proc:
         _wait_for_chunks(proc, _mcap(bag), 200_000)
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == status, err
     info, data = _check_bag(bag)
     name = signal.Signals(sig).name
@@ -109,15 +118,10 @@ def test_kill_9_loses_at_most_the_open_chunk(tmp_path):
     seconds (or a wall second): the file the kill leaves holds the definitions and the scene in its first chunk
     and then chunks of at most CHUNK_SPAN each, read by the streaming mcap reader."""
     bag = tmp_path / "bag"
-    proc = _start_run(tmp_path, bag)
-    try:
+    with _recording_run(tmp_path, bag) as proc:
         _wait_for_chunks(proc, _mcap(bag), 300_000)
         proc.kill()
         proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert not (bag / "metadata.yaml").exists()  # (closing never happened)
     spans, channels, logged = [], {}, set()
     for whole_chunks in (True, False):
