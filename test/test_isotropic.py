@@ -194,7 +194,7 @@ def test_no_attitude_work_makes_the_step_cheaper():
         def go(sim=sim, t_seg=t_seg, stops=stops, rec=rec, h=h, Bre=Bre, Bim=Bim, om=om, oy=oy, oN=oN):
             y = sim.y.copy()
             return frozen_flow.integrate_frozen(y, 0.0, t_seg, stops, rec, h, Bre, Bim, om, sim.Jinv, J, J, 2,
-                                                sim.c_m, sim.w, sim.tail, 1.0 / sim.tau, oy, oN, 0, sim.eff,
+                                                sim.c_m, sim.w, sim.tail, 1.0 / sim.tau, oy, oN, 0,
                                                 *_case_flag(sim.attitude))
 
         go()

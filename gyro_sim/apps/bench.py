@@ -444,7 +444,7 @@ def _frozen_flow_step_cost(sim, Bre, Bim, om) -> float:
     def integ():
         return frozen_flow.integrate_frozen(sim.y.copy(), 0.0, 0.0, stops, rec, h, Bre, Bim, om, sim.Jinv,
                                             sim.J[(ax + 1) % 3], sim.J[ax], ax, sim.c_m, sim.w, sim.tail,
-                                            1.0 / sim.tau, oy, oN, 0, sim.eff, None)  # (None: as simulate passes it)
+                                            1.0 / sim.tau, oy, oN, 0, None)  # (None: as simulate passes it)
 
     integ()
     return min(_once(integ) for _ in range(3)) / k

@@ -516,7 +516,7 @@ def steady_modes(y, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def integrate_frozen(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes,
-                     out_y, out_N, k_out, eff, case=None, pos=None, max_steps=0):
+                     out_y, out_N, k_out, case=None, pos=None, max_steps=0):
     """Integrate y from t0 through each time in ``t_stops`` with frozen-flow steps no longer than ``h_max``
     (equal steps between stops), recording like :func:`gyro_sim.kernels.integrate`. ``lam_modes`` (N,)
     = 1/τ_n; ``case``: isotropic rotor without attitude, modes in the case frame

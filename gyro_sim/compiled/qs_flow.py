@@ -417,7 +417,7 @@ def qs_flow_step(y, s, h, Jt, Ja, ax, k_e, M0, g0, MT0, GT0, FT, nt, MT, GT, EF,
 
 @njit(cache=True)
 def integrate_qs(y, t0, t_seg, t_stops, record, h_max, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, out_y, out_N,
-                 k_out, eff, case=None, pos=None, max_steps=0):
+                 k_out, case=None, pos=None, max_steps=0):
     """Integrate y from t0 (s) through each time in ``t_stops`` with quasi-static flow steps no longer than
     ``h_max`` (equal steps between stops), recording like :func:`gyro_sim.kernels.integrate` (phasors referred
     to t_seg; k_e = c_m × tail, tail = τ_eff). ``case``: an isotropic rotor without attitude (J = Jt). ``pos``,

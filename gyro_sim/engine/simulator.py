@@ -524,12 +524,12 @@ class Simulator:
             if method == "frozen_flow":
                 k_out, steps = frozen_flow.integrate_frozen(
                     self.y, t0, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
-                    self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, self.eff,
-                    *case, pos, budget)
+                    self.J[ax], ax, self.c_m, self.w, self.tail, 1.0 / self.tau, out_y, out_N, k_out, *case, pos,
+                    budget)
             elif method == "qs_flow":
                 k_out, steps = qs_flow.integrate_qs(
                     self.y, t0, t_seg, stops, record, h_max, Bre, Bim, om, self.Jinv, self.J[(ax + 1) % 3],
-                    self.J[ax], ax, self.c_m, self.w, self.tail, out_y, out_N, k_out, self.eff, *case, pos, budget)
+                    self.J[ax], ax, self.c_m, self.w, self.tail, out_y, out_N, k_out, *case, pos, budget)
             elif free:
                 k_out, steps = kernels.integrate_free(
                     self.y, t0, stops, record, h_max, self.Jinv, self._inv_ref, self._free_axis, self.tau,

@@ -66,10 +66,10 @@ def _fields(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
 @njit(cache=True)
 def _frozen(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
     """frozen_flow (:func:`gyro_sim.frozen_flow.integrate_frozen`); P = (Bre, Bim, ω, J⁻¹, J_t, J_a, axis, c_m, w,
-    T_tail, 1/τ, eff, case)."""
-    Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes, eff, case = P
+    T_tail, 1/τ, case)."""
+    Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, lam_modes, case = P
     return frozen_flow.integrate_frozen(y, t0, t_seg, stops, record, h, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail,
-                                        lam_modes, out_y, out_N, k, eff, case, np.zeros(3), _UNBOUNDED)
+                                        lam_modes, out_y, out_N, k, case, np.zeros(3), _UNBOUNDED)
 
 
 @njit(cache=True)
@@ -83,10 +83,10 @@ def _free(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
 @njit(cache=True)
 def _qs(y, t0, t_seg, stops, record, h, out_y, out_N, k, P):
     """The quasi-static flow step (:func:`gyro_sim.compiled.qs_flow.integrate_qs`); P = (Bre, Bim, ω, J⁻¹, J_t,
-    J_a, axis, c_m, w, T_tail, eff, case)."""
-    Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, eff, case = P
+    J_a, axis, c_m, w, T_tail, case)."""
+    Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, case = P
     return qs_flow.integrate_qs(y, t0, t_seg, stops, record, h, Bre, Bim, om, Jinv, Jt, Ja, ax, c_m, w, tail, out_y,
-                                out_N, k, eff, case, np.zeros(3), _UNBOUNDED)
+                                out_N, k, case, np.zeros(3), _UNBOUNDED)
 
 
 @njit(inline="always")
@@ -227,8 +227,8 @@ def stepper(sim, seg: tuple) -> tuple:
         ax = frozen_flow.supported(sim.J)
         head = (Bre, Bim, om, sim.Jinv, sim.J[(ax + 1) % 3], sim.J[ax], ax, sim.c_m, sim.w, sim.tail)
         if method == "qs_flow":
-            return None, None, None, (*head, sim.eff, case)
-        return None, (*head, 1.0 / sim.tau, sim.eff, case), None, None
+            return None, None, None, (*head, case)  # (no effect runs in these flows: no eff)
+        return None, (*head, 1.0 / sim.tau, case), None, None
     if free:
         return None, None, (sim.Jinv, sim._inv_ref, sim._free_axis, sim.tau), None
     A, b, c = _tableau(method)  # (made on first use: a tick loop may be a process's first lawson8 run)
