@@ -4,6 +4,7 @@ private mount namespace (`unshare -m`, skipped with the reason where it cannot b
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import shutil
 import signal
@@ -203,12 +204,15 @@ def test_streamed_run_memory_does_not_grow_with_its_duration(tmp_path, monkeypat
     """Defect 7: arrays for the whole duration were reserved at the start (~330 B per output sample in-process,
     ~2 KB per sample while writing a bag). A streamed run now holds STREAM_BUFFER_ROWS rows: its peak of traced
     allocations grows from 2 s to 8 s (4x the samples) by less than 150 bytes per sample (its time grid), and the
-    Runner never holds more rows."""
+    Runner never holds more rows. (Chunks close by simulated span only here: one closed by the wall clock is
+    smaller on a busy machine, and a 2 s run whose chunks the load cut short once made 8 s look 1 MB dearer.)"""
+    import gyro_sim.io.bag_writer as writer_mod
     import gyro_sim.io.recording as rec_mod
 
     # (both bounds reached within 2 s: the buffer and the preview are bounded, at smaller sizes here)
     monkeypatch.setattr(rec_mod, "PREVIEW_ROWS", 256)
     monkeypatch.setattr(rec_mod, "STREAM_BUFFER_ROWS", 512)
+    monkeypatch.setattr(writer_mod, "CHUNK_WALL", math.inf)
     scene = gyro_sim.load_scene("nutation_oblate")  # 1 kHz output and control ticks
     record_run(scene, tmp_path / "warm", duration=0.05)
     peaks = {}

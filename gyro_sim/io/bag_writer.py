@@ -137,14 +137,14 @@ class BagRecorder:
     if none). Thread-safe.
 
     The bag is written as it goes: chunks of at most ``chunk_span`` simulated or ``chunk_wall`` wall seconds
-    (:data:`CHUNK_SPAN`, :data:`CHUNK_WALL`), so memory stays flat and a crash loses at most one chunk. A write
+    (default :data:`CHUNK_SPAN`, :data:`CHUNK_WALL`), so memory stays flat and a crash loses at most one chunk. A write
     that fails (disk full, file size limit) drops the chunk it was writing, frees the space reserve, closes the
     bag with what was written whole and raises :class:`RecordingError`; every later write raises it too.
     """
 
     def __init__(self, path: Union[str, os.PathLike], scene_text: str, scene_name: str,
                  extra: Optional[Mapping[str, Any]] = None, static_tf: Optional[Mapping[str, Any]] = None,
-                 chunk_span: float = CHUNK_SPAN, chunk_wall: float = CHUNK_WALL):
+                 chunk_span: Optional[float] = None, chunk_wall: Optional[float] = None):
         from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
         self._writer = None
@@ -187,8 +187,9 @@ class BagRecorder:
         self.counts = {topic: 0 for topic in TOPICS}
         self.t_last = math.nan  # s, the last state sample written (in the open chunk or before)
         self.t_saved = math.nan  # s, the last state sample in a chunk written out whole
-        self._span_ns = int(round(float(chunk_span) * 1e9))
-        self._chunk_wall = float(chunk_wall)
+        # (None: the module's CHUNK_SPAN / CHUNK_WALL as they are when the bag is opened)
+        self._span_ns = int(round(float(CHUNK_SPAN if chunk_span is None else chunk_span) * 1e9))
+        self._chunk_wall = float(CHUNK_WALL if chunk_wall is None else chunk_wall)
         self._failed: Optional[str] = None
         self._reserve_fd: Optional[int] = None
         self._reserved = 0
