@@ -466,7 +466,7 @@ class ErrorControl:
         dLn = self.dLn
         # the estimate's (denom_estimate): the same differences
         self.est = tuple(max(e, b + x) for e, b, x in zip(self.est, self.banked_est,
-                                                           self._now(main, shadow, self.denom_estimate)))
+                                                           self._now(main, shadow, self.denom_estimate), strict=True))
         self.dLn = dLn
         return dL, dq, dp, self.e_L, self.e_q, self.e_p
 
