@@ -17,7 +17,8 @@ from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
 from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
-from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
+from gyro_sim.scenes.accuracy import (FINER, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
+                                      ErrorEstimate, is_legacy)
 from gyro_sim.scenes.limits import L_limit
 from gyro_sim.scenes.scene import Scene, SceneError
 from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
@@ -216,7 +217,7 @@ class Runner:
         self.sim.set_stators(by_index)
         if self.shadow is not None:
             if self._lazy and _changes(self.shadow, by_index):
-                self.sync_shadow()  # (the shadow reaches the change before it takes it)
+                self.sync_shadow(change=True)  # (the shadow reaches the change before it takes it)
             self.shadow.set_stators(by_index)
         if commands:
             names = list(commands)
@@ -288,26 +289,47 @@ class Runner:
                 sim.replan()
                 sh.replan()
 
-    def sync_shadow(self, t: Optional[float] = None) -> None:
+    def sync_shadow(self, t: Optional[float] = None, change: bool = False) -> None:
         """Advance the shadow to ``t`` (default: the run's time) and count the stretch's steps, run's and
         shadow's, for the error control (its Richardson denominator). The shadow's stops are where this is called:
-        at the checks and the end, where a command changes a stator and before an averaged stretch."""
+        at the checks and the end, where a command changes a stator (``change``) and before an averaged stretch."""
         sim, sh = self.sim, self.shadow
         t = sim.t if t is None else t
         if sh is None or not sh.t < t or sim._seg is None:
             return
         s0 = sh.steps
-        sh.advance(t)
-        self.count_stretch(sh.steps - s0)
+        # where a command change cuts the shadow's steps as the run's (its stretch no longer than R_MEASURABLE of the
+        # run's steps: commands closer than the step, e.g. every 0.5 ms), their difference would say nothing: the
+        # shadow follows the stretch with steps FINER times shorter than the run's there (the run's longest step is at
+        # least the stretch over its steps), and the difference is the run's error (ErrorControl.denom). (Not where a
+        # check cuts it: the early checks, T/4096 on, cut the run's first steps short, whose error is small beside
+        # that of whole steps; a run whose steps are all cut so is cut by its commands.)
+        k, span = sim.steps - self._steps_seen, t - sh.t
+        h = sh._segment()[6]
+        finer = 0.0  # (> 0: the shadow follows finer; the run's steps there over its plan's, what they weigh)
+        if change and math.isfinite(h) and h > 0 and 0 < k < R_MEASURABLE * math.ceil(span / h):
+            h_run = sim._seg[1][6]
+            finer = min(span / k / h_run, 1.0) if math.isfinite(h_run) and h_run > 0 else 1.0
+            gap, sh.lead_gap = sh.lead_gap, span / (k * FINER * SHADOW_RATIO[sh._segment()[5]])
+            sh.replan()
+        try:
+            sh.advance(t)
+        finally:
+            if finer > 0:
+                sh.lead_gap = gap
+                sh.replan()
+        self.count_stretch(sh.steps - s0, finer)
 
-    def count_stretch(self, shadow_steps: int) -> None:
+    def count_stretch(self, shadow_steps: int, finer: float = 0.0) -> None:
         """Count the stretch the shadow has just followed (``shadow_steps`` of its steps, the run's since the last
-        count) for the error control's Richardson denominator, under the run's present segment's stepper."""
+        count; ``finer`` > 0: its steps FINER times shorter than the run's, the run's steps that fraction of its
+        plan's, ErrorControl.note_method) for the error control's Richardson
+        denominator, under the run's present segment's stepper."""
         sim = self.sim
         assert sim._seg is not None  # (it has advanced)
         _, _, _, _, free, method, h = sim._seg[1]
         self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
-                                 exact=free and sim._free_axis != -1, stiff=h > sim.tau_min)
+                                 exact=free and sim._free_axis != -1, stiff=h > sim.tau_min, finer=finer)
         self._steps_seen = sim.steps
 
     def _check_samples(self, sel: np.ndarray, r: slice) -> int:
@@ -386,10 +408,10 @@ class Runner:
         L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
         if self.shadow is not None:
             if self.shadow.t == sim.t:
-                sL, sq, sp = ctl.measure(sim, self.shadow)[3:]
-            else:  # (a run stopped between the shadow's stops: its errors as of the last; not caught up, which may
-                # take as long as the run took since, e.g. after a signal)
-                sL, sq, sp = ctl.e_L, ctl.e_q, ctl.e_p
+                ctl.measure(sim, self.shadow)
+            # (else a run stopped between the shadow's stops: its errors as of the last; not caught up, which may
+            # take as long as the run took since, e.g. after a signal)
+            sL, sq, sp = ctl.estimate()
             how = "richardson"
             # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
             # closer than the step): the plan's model at the knob they ran

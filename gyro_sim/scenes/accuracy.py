@@ -94,6 +94,7 @@ from gyro_sim.scenes.step_control import (  # noqa: F401  (the names of the accu
     SHADOW_RATIO,
     CHECKS,
     R_MEASURABLE,
+    FINER,
     AIM,
     REFINE_MAX,
     EARLY_RHO,

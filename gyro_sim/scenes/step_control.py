@@ -239,6 +239,10 @@ SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 2.0, "free": 2.0, 
 CHECKS = tuple(2.0 ** -k for k in range(12, 4, -1)) + tuple(k / 16 for k in range(1, 16))
 #: least ratio of the run's steps to the shadow's over a stepper's stretches for their difference to measure it
 R_MEASURABLE = 1.3
+#: where stops closer than the run's step cut the shadow's steps as they cut the run's (commands every 0.5 ms), the
+#: shadow follows that stretch with steps this many times shorter than the run's instead (step doubling, the run the
+#: coarser: the difference is the run's error less 1/FINER^p of it; Runner.sync_shadow)
+FINER = 2.0
 #: the step share of the tolerance a run aims its projected error at (a margin for the estimate's own error)
 AIM = 0.5
 #: a run refines its step by at most this factor at a check, coarsens it by at most COARSEN, and keeps its step
@@ -361,6 +365,10 @@ class ErrorControl:
         self.L_max = 0.0
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
+        self.shadow_len: dict = {}  # the same, at least the run's over SHADOW_RATIO (the steps' lengths, note_method)
+        self.finer: dict = {}  # the run's steps of each stepper over the stretches the shadow followed finer
+        self.est = (0.0, 0.0, 0.0)  # the estimate's running maxima (|ΔL|, directions, phase; denom_estimate)
+        self.banked_est = (0.0, 0.0, 0.0)
         # (t, |ΔL|, direction error, phase error, error of |L|) now, at the previous check
         self.prev: Optional[tuple[float, float, float, float, float]] = None
         self.dLn = 0.0
@@ -372,29 +380,56 @@ class ErrorControl:
 
     @property
     def denom(self) -> float:
-        """r^p − 1 of the run: r the ratio of the run's steps to the shadow's over the stretches of each stepper
-        (SHADOW_RATIO where steps are not cut by stops, more where the run's stops cut its steps and the shadow's
-        do not), harmonically weighted by the run's steps (inf: only exact steps)."""
-        n = sum(self.weights.values())
+        """r^p − 1 of the run, as the step control takes it: r the ratio of the run's steps to the shadow's over the
+        stretches of each stepper (SHADOW_RATIO where steps are not cut by stops, more where the run's stops cut its
+        steps and the shadow's do not), harmonically weighted by the run's steps (inf: only exact steps)."""
+        return self._denom(False)
+
+    @property
+    def denom_estimate(self) -> float:
+        """r^p − 1 of the run as its error estimate takes it: r of the steps' lengths (:meth:`note_method`), at
+        least R_MEASURABLE where the counts measure."""
+        return self._denom(True)
+
+    def _denom(self, lengths: bool) -> float:
+        n = sum(self.weights.values()) + sum(self.finer.values())
         if not n:
             return math.inf
         acc, n = 0.0, 0
         for m, k in self.weights.items():
             r = k / max(self.shadow_steps.get(m, k), 1)
             if r >= R_MEASURABLE:  # (where the shadow took the same steps its difference says nothing)
+                if lengths:
+                    r = max(min(r, k / max(self.shadow_len.get(m, k), 1)), R_MEASURABLE)
                 acc += k / (r ** ORDER.get(m, STIFF_ORDER) - 1.0)
                 n += k
+        for m, k in self.finer.items():  # (the shadow the finer: the difference is the run's error less 1/r^p of it)
+            acc += k / (1.0 - FINER ** -ORDER.get(m, STIFF_ORDER))
+            n += k
         return n / acc if acc > 0 else math.inf
 
     def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
-                    stiff: bool = False) -> None:
+                    stiff: bool = False, finer: float = 0.0) -> None:
         """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
-        with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`)."""
+        with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`); ``finer``: a stretch the shadow
+        followed with steps at most 1/:data:`FINER` of the run's (:meth:`Runner.sync_shadow`), its value the error
+        the run's steps there make against steps of the run's plan, (h / h_plan)^p ≤ 1: a stretch cut short (an early
+        check, T/4096) weighs little beside the stretches of whole steps."""
+        # the estimate's r is of the steps' lengths, not of their counts: where the run's own stops (samples, ticks)
+        # cut its steps it takes more than SHADOW_RATIO times the shadow's, but its longest steps, which make its
+        # error, are still only SHADOW_RATIO times shorter than the shadow's (magnetizable_body: counts 3.3, r^8 − 1
+        # 59x too large); the shadow's count is taken at least the run's over SHADOW_RATIO there. (The step control
+        # keeps the counts: its decisions, and so the runs' results, as they were.)
+        ratio = SHADOW_RATIO.get(method, 2.0)
         if stiff and method == "etdrk4":
             method = STIFF
-        if not exact and steps:
+        if not exact and steps and finer:
+            w = max(min(finer, 1.0) ** ORDER.get(method, STIFF_ORDER), 1e-300)
+            self.finer[method] = self.finer.get(method, 0) + steps * w
+        elif not exact and steps:
             self.weights[method] = self.weights.get(method, 0) + steps
             self.shadow_steps[method] = self.shadow_steps.get(method, 0) + shadow_steps
+            self.shadow_len[method] = self.shadow_len.get(method, 0) + max(shadow_steps, steps / ratio)
 
     @property
     def e_L(self) -> float:
@@ -404,11 +439,11 @@ class ErrorControl:
     def note_L(self, L_norm: float) -> None:
         self.L_max = max(self.L_max, L_norm)
 
-    def _now(self, main, shadow) -> tuple[float, float, float]:
+    def _now(self, main, shadow, den: Optional[float] = None) -> tuple[float, float, float]:
         """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
         shadow (:func:`gyro_sim.physics.frames.attitude_split_one`); ``self.dLn``: the error of |L| (what turns the
         spin and precession rates: the phases drift at it over J)."""
-        den = self.denom
+        den = self.denom if den is None else den
         if not math.isfinite(den):
             self.dLn = 0.0
             return 0.0, 0.0, 0.0
@@ -428,11 +463,22 @@ class ErrorControl:
         self.dL = max(self.dL, self.banked[0] + dL)
         self.e_q = max(self.e_q, self.banked[1] + dq)
         self.e_p = max(self.e_p, self.banked[2] + dp)
+        dLn = self.dLn
+        # the estimate's (denom_estimate): the same differences
+        self.est = tuple(max(e, b + x) for e, b, x in zip(self.est, self.banked_est,
+                                                           self._now(main, shadow, self.denom_estimate), strict=True))
+        self.dLn = dLn
         return dL, dq, dp, self.e_L, self.e_q, self.e_p
+
+    def estimate(self) -> tuple[float, float, float]:
+        """The steps' error so far as the estimate reports it: (L relative, directions rad, spin phase rad), the
+        running maxima at :attr:`denom_estimate`."""
+        return (self.est[0] / self.L_max if self.L_max > 0 else 0.0), self.est[1], self.est[2]
 
     def bank(self) -> None:
         """Keep the errors so far (the shadow is about to be set to the run's state: a fidelity hand-over)."""
         self.banked = (self.dL, self.e_q, self.e_p)
+        self.banked_est = self.est
         self.prev = None
         self.dLn = 0.0
 
