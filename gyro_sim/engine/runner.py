@@ -70,7 +70,7 @@ class Runner:
         if not force:
             check_budget(self.sim, T, self.period)
         if not is_legacy():
-            self.sim._warn_plan(self.sim._rates[0])
+            self.sim.step_size.warn_plan(self.sim.state())
         # the error control and its shadow run (gyro_sim/scenes/accuracy.py); checks at fixed fractions of the horizon
         plan = self.sim.step_plan
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
@@ -141,7 +141,7 @@ class Runner:
         self.compile_time = 0.0
         # the run fails loudly where its state breaks (_check_samples): "failed: <what> at t = … s", else None
         self.failure: Optional[str] = None
-        self.L_sound = L_limit(scene, self.sim.max_rate, self.sim._effect_rate())  # N m s (scenes/limits.py)
+        self.L_sound = L_limit(scene, self.sim.max_rate, self.sim.terms.effect_rate(self.sim.t, self.sim.y))  # N m s
 
     # --- the loop, one break at a time ---------------------------------------------------------
     @property
@@ -307,7 +307,7 @@ class Runner:
         assert sim._seg is not None  # (it has advanced)
         _, _, _, _, free, method, h = sim._seg[1]
         self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
-                                 exact=free and sim._free_axis != -1, stiff=h > sim.tau_min)
+                                 exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min)
         self._steps_seen = sim.steps
 
     def _check_samples(self, sel: np.ndarray, r: slice) -> int:
@@ -402,8 +402,8 @@ class Runner:
                 pL, pq = sim.step_plan.predicted(m, knob)
                 sL, sq, sp, how = sL + pL, sq + pq, sp + pq, "richardson+model"
         else:
-            used = sorted(getattr(sim, "methods_used", set()) or {"free"})
-            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim._free_axis == -1]
+            used = sorted(sim.step_size.methods_used or {"free"})
+            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim.terms.free_axis == -1]
             sL = max([p[0] for p in pred] + [0.0])
             sq = sp = max([p[1] for p in pred] + [0.0])
             how = "model"
