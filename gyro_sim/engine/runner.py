@@ -11,12 +11,12 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
-from gyro_sim.engine.model import (AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times,
-                                   system_energy)
+from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period
 from gyro_sim.engine.result import RunResult
+from gyro_sim.engine.saving import output_times, run_result, sample_arrays
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
-from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
+from gyro_sim.physics.frames import symmetry_axis
 from gyro_sim.scenes.accuracy import R_MEASURABLE, RATE_KNOB, STIFF, ErrorControl, ErrorEstimate, is_legacy
 from gyro_sim.scenes.limits import L_limit
 from gyro_sim.scenes.scene import Scene, SceneError
@@ -483,45 +483,21 @@ class Runner:
         return slice(first, self.row)
 
     def samples(self, rows: slice, euler: bool = True) -> dict:
-        """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current,
-        rate, phase, modes, effects (without attitude: q and euler NaN, omega_b in the case frame). ``rows``: output rows of the
-        whole run (not yet released)."""
+        """Output rows as arrays (:func:`gyro_sim.engine.saving.sample_arrays`): t, L, q, omega_b, euler (None
+        unless ``euler``), torque, energy, current, rate, phase, modes, effects. ``rows``: output rows of the whole
+        run (not yet released)."""
         t_rows, rows = self.t_out[rows], self._buf(rows)
-        L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
-        extra = {}
-        if not self.sim.attitude:
-            omega_b = self.sim.body_rates(t_rows, self.out_y[rows])
-            energy = kinetic_energy(self.sim.J, omega_b)  # isotropic: frame-free
-        elif self.sim.eff[effects.ON]:
-            t = t_rows
-            omega_b = self.sim.body_rates(t, self.out_y[rows])
-            extra = self.sim.effect_outputs(t, self.out_y[rows])
-            energy = system_energy(self.scene, omega_b, extra)  # the body's and its internal bodies'
-        else:
-            _, omega_b = body_rates(self.sim.J, L, q)
-            energy = kinetic_energy(self.sim.J, omega_b)
-        eul = None
-        if euler:
-            eul = euler_angles(quat_to_matrix(q), L) if self.sim.attitude else np.full((L.shape[0], 3), np.nan)
-        return {"t": t_rows, "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
-                "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
-                "modes": self.out_y[rows, 7:7 + 3 * self.sim.tau.size], "effects": extra}
+        return sample_arrays(self.scene, self.sim.terms, self.sim.attitude, t_rows, self.out_y[rows],
+                             self.out_N[rows], self.cur[rows], self.rate[rows], self.phase[rows], euler=euler)
 
     def result(self) -> RunResult:
-        """The whole run as a :class:`RunResult` (refused once rows were released: a streamed run's result is read
-        back from its bag)."""
+        """The whole run as a :class:`RunResult` (:func:`gyro_sim.engine.saving.run_result`; refused once rows were
+        released: a streamed run's result is read back from its bag)."""
         if self._base:
             raise RuntimeError("Runner.result: output rows were released (a streamed run); read its bag back")
-        s = self.samples(slice(0, self.row), euler=False)
-        return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"],
-                         torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
-                         current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
-                         modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
-                         compile_time=self.compile_time,
-                         steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
-                         attitude=self.sim.attitude,
-                         error_estimate=None if self.failure is not None else self.error_estimate(),
-                         failure=self.failure)
+        return run_result(self.scene, self.sim.terms, self.sim.attitude, self.samples(slice(0, self.row), euler=False),
+                          self.sim.steps, list(self.command_log), self.wall_time, self.compile_time,
+                          None if self.failure is not None else self.error_estimate(), self.failure)
 
 
 def _holds(times: np.ndarray, t: float) -> bool:

@@ -23,9 +23,10 @@ from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.model import (_TABLEAU, AVERAGED_ERROR, DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN,  # noqa: F401
                                    FROZEN_FLOW_COST, LAWS_WITHOUT_ATTITUDE, _case_flag, _initial_attitude, _tableau,
                                    body_rates, controller_period, integrates_attitude, kinetic_energy, lawson8_cost,
-                                   output_times, stator_triad, system_energy)
+                                   stator_triad, system_energy)
 from gyro_sim.engine.result import RunResult, error_summary  # noqa: F401
 from gyro_sim.engine.runner import Runner
+from gyro_sim.engine.saving import output_times
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.scenes.scene import Scene
 

@@ -92,13 +92,15 @@ class Simulator:
         if terms.tau.size:
             terms.field_step(self.y, np.zeros(3), self.field_now())
         self.steps = 0
-        self.call_steps = steppers.CALL_STEPS[0]  # most steps of one stepper call (advance: tuned to CALL_WALL s a call)
-        self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None] + [0.0])
+        self.call_steps = steppers.CALL_STEPS[0]  # most steps of one stepper call (tuned to CALL_WALL s a call)
+        self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None]
+                           + [0.0])
         # --- the step plan for the scene's accuracy over the horizon (gyro_sim/engine/step_size.py)
         self.step_size = StepSize(scene, terms, self.attitude, self.horizon, om_reach, self.mode_plan, self.y,
                                   quiet=quiet)
-        if not quiet and not is_legacy() and warn_plan:  # (warn_plan False: the caller warns, _warn_plan, once the
-            self._warn_plan()                            # step budget has passed the plan: Runner)
+        # (warn_plan False: the caller warns, StepSize.warn_plan, once the step budget has passed the plan: Runner)
+        if not quiet and not is_legacy() and warn_plan:
+            self._warn_plan()
 
     def state(self) -> State:
         """The state a step is planned from (:class:`gyro_sim.engine.step_size.State`; its arrays are this
@@ -278,9 +280,11 @@ class Simulator:
                 stops = np.append(stops, t_end)
                 record = np.append(record, False)
         seg = self._segment()
-        for k_out, steps, self.call_steps in steppers.integrate(self.terms, self.y, self.t, t_end, seg, stops, record,
-                                                                out_y, out_N, k_out, self.call_steps):
-            self.steps += steps  # (call by call: a run interrupted between two calls counts the steps it took)
+        calls = steppers.integrate(self.terms, self.y, self.t, t_end, seg, stops, record, out_y, out_N, k_out,
+                                   self.call_steps)
+        for row, steps, call_steps in calls:  # (call by call: a run interrupted between two calls counts its steps)
+            self.steps += steps
+            self.call_steps, k_out = call_steps, row
         self.phase = np.mod(self.phase + self.rate * (t_end - self.t), 2 * math.pi)
         self.t = t_end
         self._seg_t_end = t_end

@@ -65,7 +65,8 @@ def arguments(terms, seg: Segment) -> tuple:
     if free:
         return None, None, (terms.Jinv, terms.inv_ref, terms.free_axis, terms.tau), None
     A, b, c = _tableau(method)  # (made on first use: a tick loop may be a process's first lawson8 run)
-    return (Bre, Bim, om, terms.Jinv, terms.c_m, terms.w, terms.tail, terms.lam, terms.eff, A, b, c, case), None, None, None
+    P = (Bre, Bim, om, terms.Jinv, terms.c_m, terms.w, terms.tail, terms.lam, terms.eff, A, b, c, case)
+    return P, None, None, None
 
 
 def integrate(terms, y: np.ndarray, t0: float, t_end: float, seg: Segment, stops: np.ndarray, record: np.ndarray,
