@@ -72,12 +72,12 @@ class Runner:
         if not is_legacy():
             self.sim.step_size.warn_plan(self.sim.state())
         # the error control and its shadow run (gyro_sim/scenes/accuracy.py); checks at fixed fractions of the horizon
-        plan = self.sim.step_plan
+        plan = self.sim.step_size.step_plan
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
             estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
         self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
-                                    J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound,
-                                    axis=symmetry_axis(self.sim.J), accuracy=scene.accuracy)
+                                    J_min=float(np.min(self.sim.terms.J)), L_bound=self.sim.step_size.L_bound,
+                                    axis=symmetry_axis(self.sim.terms.J), accuracy=scene.accuracy)
         self.shadow = None
         if estimate:
             self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
@@ -90,7 +90,7 @@ class Runner:
         self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
         self._turned = 0.0  # ∫ |Ω| dt over the output samples (rad, |Ω| ≤ |L|/J_min): the phase the rotor turns
         self._last_t = 0.0
-        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.Jinv))
+        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.terms.Jinv))
         self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
@@ -102,7 +102,7 @@ class Runner:
         # output samples are breaks where a caller acts on each (the ROS node publishes and paces); in-process
         # they are recorded inside one advance (the same bits: Simulator._segment)
         # (with an effect on the step plan is made afresh at every advance: the samples stay breaks)
-        if self.sim.eff[effects.ON] != 0.0:
+        if self.sim.terms.eff[effects.ON] != 0.0:
             sample_breaks = True
         # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
         # the breaks of every run, samples or not: where the shadow follows (Runner._follow)
@@ -116,7 +116,7 @@ class Runner:
         # free to step over its ticks: their Richardson difference then measures a run whose steps are as long
         # as the ticks). With an effect on (its rates change in time, the plan is made afresh at every break) the
         # shadow follows through every break of every run, as the run does.
-        self._lazy = self.sim.eff[effects.ON] == 0.0
+        self._lazy = self.sim.terms.eff[effects.ON] == 0.0
         if self.shadow is not None:
             stops = np.unique(np.concatenate([t_out, self.breaks, [0.0]]))
             # (its step at most SHADOW_RATIO times the run's longest: the run's steps end at its stops)
@@ -127,7 +127,7 @@ class Runner:
             raise ValueError(f"buffer_rows = {buffer_rows}: must be at least 2")
         n = t_out.size if buffer_rows is None else min(t_out.size, int(buffer_rows))
         self._base = 0  # the output row (of the whole run) held in buffer row 0
-        k = len(self.sim.stator_names)
+        k = len(self.sim.terms.stator_names)
         self.out_y = np.empty((n, self.sim.y.size))
         self.out_N = np.empty((n, 3))
         self.cur = np.empty((n, k))
@@ -141,7 +141,8 @@ class Runner:
         self.compile_time = 0.0
         # the run fails loudly where its state breaks (_check_samples): "failed: <what> at t = … s", else None
         self.failure: Optional[str] = None
-        self.L_sound = L_limit(scene, self.sim.max_rate, self.sim.terms.effect_rate(self.sim.t, self.sim.y))  # N m s
+        terms = self.sim.terms  # N m s (scenes/limits.py)
+        self.L_sound = L_limit(scene, terms.max_rate, terms.effect_rate(self.sim.t, self.sim.y))
 
     # --- the loop, one break at a time ---------------------------------------------------------
     @property
@@ -199,20 +200,20 @@ class Runner:
 
         sim = self.sim
         L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
-        if sim.eff[effects.ON] or not sim.attitude:
+        if sim.terms.eff[effects.ON] or not sim.attitude:
             omega_b = sim.body_rates(sim.t, sim.y)[0]
         else:
-            omega_b = body_rates(sim.J, L, q)[1]
+            omega_b = body_rates(sim.terms.J, L, q)[1]
         if not hasattr(self, "_axes"):
-            self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
+            self._axes = (tuple(sim.terms.stator_names), np.cross(sim.terms.e1, sim.terms.e2))
         return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
 
     def apply_commands(self, commands: dict) -> None:
         """Apply ``{stator name: (current A, rate rad/s)}`` now (unknown names raise ValueError)."""
         for name in commands:
-            if name not in self.sim.stator_names:
-                raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
-        by_index = {self.sim.stator_names.index(n): c for n, c in commands.items()}
+            if name not in self.sim.terms.stator_names:
+                raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.terms.stator_names}")
+        by_index = {self.sim.terms.stator_names.index(n): c for n, c in commands.items()}
         self.sim.set_stators(by_index)
         if self.shadow is not None:
             if self._lazy and _changes(self.shadow, by_index):
@@ -354,7 +355,7 @@ class Runner:
         Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
         self.control.note_L(float(np.max(Ln)))
         dt = np.diff(np.concatenate([[self._last_t], sel]))
-        om = Ln * float(np.max(self.sim.Jinv))
+        om = Ln * float(np.max(self.sim.terms.Jinv))
         # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
         self._turned = float(np.cumsum(np.concatenate([[self._turned], om * dt]))[-1])
         if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)

@@ -4,11 +4,16 @@ The simulator is the one piece of code every front end drives: :func:`run`, the 
 real-time) and the tests. Units SI, L in the case frame, attitude quaternion body → case. Its parts live beside
 this module and are re-exported here (``gyro_sim.simulate`` is this module):
 
+* :mod:`gyro_sim.engine.terms`: the model's terms (conductor modes, stators, field phasors, effects, torque, body
+  rates);
+* :mod:`gyro_sim.engine.step_size`: the controller of the step (a segment's stepper and largest step);
+* :mod:`gyro_sim.engine.steppers`: one interface to the compiled steppers;
+* :mod:`gyro_sim.engine.saving`: the output instants, sample arrays and the :class:`RunResult` of a run;
+* :mod:`gyro_sim.engine.simulator`: :class:`Simulator` (a run's state, composing the parts above);
+* :mod:`gyro_sim.engine.runner`: :class:`Runner` (the run loop: breaks, ticks, the error control);
 * :mod:`gyro_sim.engine.model`: shared pieces (step knobs, lawson8's table, :func:`integrates_attitude`,
-  :func:`controller_period`, :func:`stator_triad`, body rates, kinetic energy, the output grid);
-* :mod:`gyro_sim.engine.result`: :class:`RunResult`;
-* :mod:`gyro_sim.engine.simulator`: :class:`Simulator` (the model of a scene advanced by the compiled steppers);
-* :mod:`gyro_sim.engine.runner`: :class:`Runner` (breaks, ticks, samples, the error control).
+  :func:`controller_period`, :func:`stator_triad`, body rates, kinetic energy);
+* :mod:`gyro_sim.engine.result`: :class:`RunResult`.
 
 A run without attitude (:func:`integrates_attitude` False: ``output.attitude: false`` on an isotropic
 rotor without effects, full fidelity, no controller law that reads the attitude) integrates L and the eddy

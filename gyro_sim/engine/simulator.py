@@ -199,7 +199,7 @@ class Simulator:
     def stator_index(self, stator) -> int:
         """The index of a stator given by name (``'z1'``) or index (0 … k−1); anything else raises one
         ValueError naming the value and the stator names."""
-        names = self.stator_names
+        names = self.terms.stator_names
         if isinstance(stator, str) and stator in names:
             return names.index(stator)
         if not isinstance(stator, (str, bool)) and isinstance(stator, (int, np.integer)) \
@@ -224,11 +224,11 @@ class Simulator:
         stators are named in). A current or rate that is not finite, a negative current, or one beyond the stator's
         ``max_current`` / ``max_rate`` (:mod:`gyro_sim.scenes.limits`) is refused with one ValueError naming the
         stator, the value and the limit, before anything changes."""
-        n = len(self.stator_names)
+        n = len(self.terms.stator_names)
         if not all(type(k) is int and 0 <= k < n for k in commands):  # (the Runner's: indices in range already)
             commands = {self.stator_index(k): c for k, c in commands.items()}
         for k, (current, rate) in commands.items():
-            why = command_problem(self, k, current, rate)
+            why = command_problem(self.terms, k, current, rate)  # (its stator_names, max_current, max_rate)
             if why:
                 raise ValueError(why)
         changed = {k: c for k, (c, _) in commands.items() if c is not None and c != self.current[k]}

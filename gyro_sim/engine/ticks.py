@@ -248,9 +248,10 @@ class TickLoop:
         else:
             self.kind, self.fp, self.cl, self.rl = law.kind, law.fp, law.current_limit, law.rate_limit
             self.needs_time, self.reads_state = law.needs_time, law.reads_state
-            self.names = law.command_names(sim.stator_names)
-            self.axes = law.control_axes(sim.stator_names, np.cross(sim.e1, sim.e2))  # (the axes control_input gives)
-        self.idx = np.array([sim.stator_names.index(n) for n in self.names], dtype=np.int64)
+            terms = sim.terms
+            self.names = law.command_names(terms.stator_names)
+            self.axes = law.control_axes(terms.stator_names, np.cross(terms.e1, terms.e2))  # (control_input's axes)
+        self.idx = np.array([sim.terms.stator_names.index(n) for n in self.names], dtype=np.int64)
 
     def advance(self, until: Optional[float] = None) -> Optional[slice]:
         """Advance through the plain breaks ahead (up to :data:`MAX_BREAKS`, none after ``until`` s, as many as the
@@ -366,7 +367,7 @@ def tick_loop(r, law) -> Optional[TickLoop]:
     made afresh at each break), a law naming a stator the scene lacks (the Python loop then says so)."""
     if not _ENABLED[0] or law is not None and not isinstance(law, CompiledLaw):
         return None
-    if r.sim.eff[ON] != 0.0:
+    if r.sim.terms.eff[ON] != 0.0:
         return None
     try:
         return TickLoop(r, law)
