@@ -279,6 +279,7 @@ class Simulator:
             if stops[-1] < t_end:
                 stops = np.append(stops, t_end)
                 record = np.append(record, False)
+        assert out_y is not None and out_N is not None  # (rows to write the samples into)
         seg = self._segment()
         calls = steppers.integrate(self.terms, self.y, self.t, t_end, seg, stops, record, out_y, out_N, k_out,
                                    self.call_steps)
@@ -315,9 +316,8 @@ class Simulator:
         self.step_size.check_slip(om, st)
         # no field (or no torque model) and no effect: the geometric free stepper
         free = (om.size == 0 or (self.terms.c_m == 0.0 and eff[effects.MAG] == 0.0)) and eff[effects.ON] == 0.0
-        lead = self.leader
-        if lead is not None:
-            lead = Lead(lead._seg[1][5] if lead._seg is not None else None, lead.step_div, self.lead_gap)
+        ld = self.leader
+        lead = None if ld is None else Lead(ld._seg[1][5] if ld._seg is not None else None, ld.step_div, self.lead_gap)
         method, h_max = self.step_size.plan(free, st, self.step_div, lead)
         self._seg = (key, (self.t, Bre, Bim, om, free, method, h_max))
         return self._seg[1]

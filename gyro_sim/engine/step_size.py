@@ -224,7 +224,7 @@ class StepSize:
             return kept[1]
         # |B| summed over the phasors: √2 b_k I_k a stator (its Bre, Bim are b_k I_k times two orthonormal vectors),
         # |B_p| a general field term (scalar code: this is asked once per command segment)
-        B = sum(math.sqrt(2.0) * b * c for b, c in zip(terms.b.tolist(), st.current.tolist()) if c > 0)
+        B = sum(math.sqrt(2.0) * b * c for b, c in zip(terms.b.tolist(), st.current.tolist(), strict=True) if c > 0)
         B += sum(float(np.linalg.norm(f)) for f in terms.field_B) if terms.field_B.size else 0.0
         om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * max(terms.Jinv.tolist()),
                  st.nu_max, max((abs(f) for f in terms.field_om.tolist()), default=0.0))
