@@ -208,8 +208,8 @@ class StepSize:
         terms, y = self.terms, st.y
         Jt, Ja = float(terms.J[(ax + 1) % 3]), float(terms.J[ax])
         e_a = quat_to_matrix(y[3:7])[:, ax] if self.attitude and Jt != Ja else None
-        return frozen_flow.torque_scale(*terms.phasors(st.t, st.current, st.rate, st.phase), y[0:3], Jt, Ja, e_a,
-                                        terms.c_m, terms.w, terms.tau, terms.tail)
+        Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
+        return frozen_flow.torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a, terms.c_m, terms.w, terms.tau, terms.tail)
 
     def torque_time(self, st: State) -> float:
         """J_min Ω / N (s): the time the torque's scale N takes to change the fastest rate Ω by itself (inf without
