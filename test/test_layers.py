@@ -126,3 +126,23 @@ def test_gyro_sim_testing_is_the_public_name_of_the_kit():
         import gyro_sim.apps.testing
         import gyro_sim.testing
     assert gyro_sim.testing is gyro_sim.apps.testing
+
+
+#: the engine's parts (issue 28, docs/architecture.md "One run"): a solver library's shape — the model's terms, the
+#: controller of the step, one step interface, the output — each its own module
+ENGINE_PARTS = ("terms", "step_size", "steppers", "saving")
+
+
+def test_the_engine_parts_are_modules_that_never_reach_up_into_the_simulator_or_the_runner():
+    """Each part is a module of gyro_sim/engine/ and imports neither the Simulator nor the Runner (nor the entry
+    that drives them): they are handed what they need, so a reader follows one part without the hub."""
+    above = {"gyro_sim.engine.simulator", "gyro_sim.engine.runner", "gyro_sim.engine.simulate",
+             "gyro_sim.engine.ticks", "gyro_sim.engine.fidelity"}
+    for part in ENGINE_PARTS:
+        name = f"gyro_sim.engine.{part}"
+        assert name in GRAPH, f"{name}: no such module"
+        up = sorted(set(GRAPH[name]) & above)
+        assert not up, f"{name} imports {up}"
+    # and the Simulator composes them
+    composed = {f"gyro_sim.engine.{p}" for p in ("terms", "step_size", "steppers")}
+    assert composed <= set(GRAPH["gyro_sim.engine.simulator"])

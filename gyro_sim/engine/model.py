@@ -1,5 +1,6 @@
 """The pieces of a run every part of the engine shares: step knobs, the lawson8 table, which runs integrate the
-attitude, the controller period, stator triads, body rates, kinetic energy and the output grid (SI).
+attitude, the controller period, stator triads, body rates and kinetic energy (SI); the output grid is
+:func:`gyro_sim.engine.saving.output_times`.
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 
 from gyro_sim.compiled import kernels
 from gyro_sim.physics.frames import attitude_from_euler, quat_to_matrix
-from gyro_sim.scenes.scene import Scene, merge_times
+from gyro_sim.scenes.scene import Scene
 
 
 #: the fixed step knobs of the runs before the accuracy plan (issue 19): steps per turn of the fastest rotation and
@@ -146,13 +147,3 @@ def system_energy(scene: Scene, omega_b: np.ndarray, effects: dict) -> np.ndarra
 
         E = E + wheel_energy(omega_b, fly.inertia, fly.axis, effects["flywheel_speed"])
     return E
-
-
-def output_times(scene: Scene, T: float, period: Optional[float] = None) -> tuple[np.ndarray, np.ndarray]:
-    """(output instants, tick instants), s, sorted, of a run of ``scene`` over ``T`` s: the scene's output grid with
-    a tick every ``period`` s (None: no ticks) merged in (a tick is exact: a sample within round-off is it). The
-    :class:`Runner`'s grid; a bag's reader maps the ns stamps back onto it (:func:`gyro_sim.results.read_bag`)."""
-    ticks = np.arange(int(math.ceil(T / period - 1e-9))) * period if period is not None else np.zeros(0)
-    return merge_times(scene.output.sample_times(T), ticks), ticks
-
-

@@ -11,12 +11,12 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
-from gyro_sim.engine.model import (AVERAGED_ERROR, body_rates, controller_period, kinetic_energy, output_times,
-                                   system_energy)
+from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period
 from gyro_sim.engine.result import RunResult
+from gyro_sim.engine.saving import output_times, run_result, sample_arrays
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
-from gyro_sim.physics.frames import euler_angles, quat_to_matrix, symmetry_axis
+from gyro_sim.physics.frames import symmetry_axis
 from gyro_sim.scenes.accuracy import (FINER, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
                                       ErrorEstimate, is_legacy)
 from gyro_sim.scenes.limits import L_limit
@@ -71,14 +71,14 @@ class Runner:
         if not force:
             check_budget(self.sim, T, self.period)
         if not is_legacy():
-            self.sim._warn_plan(self.sim._rates[0])
+            self.sim.step_size.warn_plan(self.sim.state())
         # the error control and its shadow run (gyro_sim/scenes/accuracy.py); checks at fixed fractions of the horizon
-        plan = self.sim.step_plan
+        plan = self.sim.step_size.step_plan
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
             estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
         self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
-                                    J_min=float(np.min(self.sim.J)), L_bound=self.sim.L_bound,
-                                    axis=symmetry_axis(self.sim.J), accuracy=scene.accuracy)
+                                    J_min=float(np.min(self.sim.terms.J)), L_bound=self.sim.step_size.L_bound,
+                                    axis=symmetry_axis(self.sim.terms.J), accuracy=scene.accuracy)
         self.shadow = None
         if estimate:
             self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
@@ -91,7 +91,7 @@ class Runner:
         self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
         self._turned = 0.0  # ∫ |Ω| dt over the output samples (rad, |Ω| ≤ |L|/J_min): the phase the rotor turns
         self._last_t = 0.0
-        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.Jinv))
+        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.terms.Jinv))
         self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
@@ -103,7 +103,7 @@ class Runner:
         # output samples are breaks where a caller acts on each (the ROS node publishes and paces); in-process
         # they are recorded inside one advance (the same bits: Simulator._segment)
         # (with an effect on the step plan is made afresh at every advance: the samples stay breaks)
-        if self.sim.eff[effects.ON] != 0.0:
+        if self.sim.terms.eff[effects.ON] != 0.0:
             sample_breaks = True
         # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
         # the breaks of every run, samples or not: where the shadow follows (Runner._follow)
@@ -117,7 +117,7 @@ class Runner:
         # free to step over its ticks: their Richardson difference then measures a run whose steps are as long
         # as the ticks). With an effect on (its rates change in time, the plan is made afresh at every break) the
         # shadow follows through every break of every run, as the run does.
-        self._lazy = self.sim.eff[effects.ON] == 0.0
+        self._lazy = self.sim.terms.eff[effects.ON] == 0.0
         if self.shadow is not None:
             stops = np.unique(np.concatenate([t_out, self.breaks, [0.0]]))
             # (its step at most SHADOW_RATIO times the run's longest: the run's steps end at its stops)
@@ -128,7 +128,7 @@ class Runner:
             raise ValueError(f"buffer_rows = {buffer_rows}: must be at least 2")
         n = t_out.size if buffer_rows is None else min(t_out.size, int(buffer_rows))
         self._base = 0  # the output row (of the whole run) held in buffer row 0
-        k = len(self.sim.stator_names)
+        k = len(self.sim.terms.stator_names)
         self.out_y = np.empty((n, self.sim.y.size))
         self.out_N = np.empty((n, 3))
         self.cur = np.empty((n, k))
@@ -142,7 +142,8 @@ class Runner:
         self.compile_time = 0.0
         # the run fails loudly where its state breaks (_check_samples): "failed: <what> at t = … s", else None
         self.failure: Optional[str] = None
-        self.L_sound = L_limit(scene, self.sim.max_rate, self.sim._effect_rate())  # N m s (scenes/limits.py)
+        terms = self.sim.terms  # N m s (scenes/limits.py)
+        self.L_sound = L_limit(scene, terms.max_rate, terms.effect_rate(self.sim.t, self.sim.y))
 
     # --- the loop, one break at a time ---------------------------------------------------------
     @property
@@ -200,20 +201,20 @@ class Runner:
 
         sim = self.sim
         L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
-        if sim.eff[effects.ON] or not sim.attitude:
+        if sim.terms.eff[effects.ON] or not sim.attitude:
             omega_b = sim.body_rates(sim.t, sim.y)[0]
         else:
-            omega_b = body_rates(sim.J, L, q)[1]
+            omega_b = body_rates(sim.terms.J, L, q)[1]
         if not hasattr(self, "_axes"):
-            self._axes = (tuple(sim.stator_names), np.cross(sim.e1, sim.e2))
+            self._axes = (tuple(sim.terms.stator_names), np.cross(sim.terms.e1, sim.terms.e2))
         return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
 
     def apply_commands(self, commands: dict) -> None:
         """Apply ``{stator name: (current A, rate rad/s)}`` now (unknown names raise ValueError)."""
         for name in commands:
-            if name not in self.sim.stator_names:
-                raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.stator_names}")
-        by_index = {self.sim.stator_names.index(n): c for n, c in commands.items()}
+            if name not in self.sim.terms.stator_names:
+                raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.terms.stator_names}")
+        by_index = {self.sim.terms.stator_names.index(n): c for n, c in commands.items()}
         self.sim.set_stators(by_index)
         if self.shadow is not None:
             if self._lazy and _changes(self.shadow, by_index):
@@ -329,7 +330,7 @@ class Runner:
         assert sim._seg is not None  # (it has advanced)
         _, _, _, _, free, method, h = sim._seg[1]
         self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
-                                 exact=free and sim._free_axis != -1, stiff=h > sim.tau_min, finer=finer)
+                                 exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min, finer=finer)
         self._steps_seen = sim.steps
 
     def _check_samples(self, sel: np.ndarray, r: slice) -> int:
@@ -376,7 +377,7 @@ class Runner:
         Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
         self.control.note_L(float(np.max(Ln)))
         dt = np.diff(np.concatenate([[self._last_t], sel]))
-        om = Ln * float(np.max(self.sim.Jinv))
+        om = Ln * float(np.max(self.sim.terms.Jinv))
         # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
         self._turned = float(np.cumsum(np.concatenate([[self._turned], om * dt]))[-1])
         if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
@@ -424,8 +425,8 @@ class Runner:
                 pL, pq = sim.step_plan.predicted(m, knob)
                 sL, sq, sp, how = sL + pL, sq + pq, sp + pq, "richardson+model"
         else:
-            used = sorted(getattr(sim, "methods_used", set()) or {"free"})
-            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim._free_axis == -1]
+            used = sorted(sim.step_size.methods_used or {"free"})
+            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim.terms.free_axis == -1]
             sL = max([p[0] for p in pred] + [0.0])
             sq = sp = max([p[1] for p in pred] + [0.0])
             how = "model"
@@ -505,45 +506,21 @@ class Runner:
         return slice(first, self.row)
 
     def samples(self, rows: slice, euler: bool = True) -> dict:
-        """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current,
-        rate, phase, modes, effects (without attitude: q and euler NaN, omega_b in the case frame). ``rows``: output rows of the
-        whole run (not yet released)."""
+        """Output rows as arrays (:func:`gyro_sim.engine.saving.sample_arrays`): t, L, q, omega_b, euler (None
+        unless ``euler``), torque, energy, current, rate, phase, modes, effects. ``rows``: output rows of the whole
+        run (not yet released)."""
         t_rows, rows = self.t_out[rows], self._buf(rows)
-        L, q = self.out_y[rows, 0:3], self.out_y[rows, 3:7]
-        extra = {}
-        if not self.sim.attitude:
-            omega_b = self.sim.body_rates(t_rows, self.out_y[rows])
-            energy = kinetic_energy(self.sim.J, omega_b)  # isotropic: frame-free
-        elif self.sim.eff[effects.ON]:
-            t = t_rows
-            omega_b = self.sim.body_rates(t, self.out_y[rows])
-            extra = self.sim.effect_outputs(t, self.out_y[rows])
-            energy = system_energy(self.scene, omega_b, extra)  # the body's and its internal bodies'
-        else:
-            _, omega_b = body_rates(self.sim.J, L, q)
-            energy = kinetic_energy(self.sim.J, omega_b)
-        eul = None
-        if euler:
-            eul = euler_angles(quat_to_matrix(q), L) if self.sim.attitude else np.full((L.shape[0], 3), np.nan)
-        return {"t": t_rows, "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": self.out_N[rows],
-                "energy": energy, "current": self.cur[rows], "rate": self.rate[rows], "phase": self.phase[rows],
-                "modes": self.out_y[rows, 7:7 + 3 * self.sim.tau.size], "effects": extra}
+        return sample_arrays(self.scene, self.sim.terms, self.sim.attitude, t_rows, self.out_y[rows],
+                             self.out_N[rows], self.cur[rows], self.rate[rows], self.phase[rows], euler=euler)
 
     def result(self) -> RunResult:
-        """The whole run as a :class:`RunResult` (refused once rows were released: a streamed run's result is read
-        back from its bag)."""
+        """The whole run as a :class:`RunResult` (:func:`gyro_sim.engine.saving.run_result`; refused once rows were
+        released: a streamed run's result is read back from its bag)."""
         if self._base:
             raise RuntimeError("Runner.result: output rows were released (a streamed run); read its bag back")
-        s = self.samples(slice(0, self.row), euler=False)
-        return RunResult(scene=self.scene, t=s["t"], L=s["L"], q=s["q"], omega_b=s["omega_b"],
-                         torque=s["torque"], energy=s["energy"], stator_names=list(self.sim.stator_names),
-                         current=s["current"], field_rate=s["rate"], field_phase=s["phase"],
-                         modes=self.out_y[: self.row, 7:7 + 3 * self.sim.tau.size], wall_time=self.wall_time,
-                         compile_time=self.compile_time,
-                         steps=self.sim.steps, commands=list(self.command_log), effects=s["effects"],
-                         attitude=self.sim.attitude,
-                         error_estimate=None if self.failure is not None else self.error_estimate(),
-                         failure=self.failure)
+        return run_result(self.scene, self.sim.terms, self.sim.attitude, self.samples(slice(0, self.row), euler=False),
+                          self.sim.steps, list(self.command_log), self.wall_time, self.compile_time,
+                          None if self.failure is not None else self.error_estimate(), self.failure)
 
 
 def _holds(times: np.ndarray, t: float) -> bool:

@@ -4,11 +4,16 @@ The simulator is the one piece of code every front end drives: :func:`run`, the 
 real-time) and the tests. Units SI, L in the case frame, attitude quaternion body → case. Its parts live beside
 this module and are re-exported here (``gyro_sim.simulate`` is this module):
 
+* :mod:`gyro_sim.engine.terms`: the model's terms (conductor modes, stators, field phasors, effects, torque, body
+  rates);
+* :mod:`gyro_sim.engine.step_size`: the controller of the step (a segment's stepper and largest step);
+* :mod:`gyro_sim.engine.steppers`: one interface to the compiled steppers;
+* :mod:`gyro_sim.engine.saving`: the output instants, sample arrays and the :class:`RunResult` of a run;
+* :mod:`gyro_sim.engine.simulator`: :class:`Simulator` (a run's state, composing the parts above);
+* :mod:`gyro_sim.engine.runner`: :class:`Runner` (the run loop: breaks, ticks, the error control);
 * :mod:`gyro_sim.engine.model`: shared pieces (step knobs, lawson8's table, :func:`integrates_attitude`,
-  :func:`controller_period`, :func:`stator_triad`, body rates, kinetic energy, the output grid);
-* :mod:`gyro_sim.engine.result`: :class:`RunResult`;
-* :mod:`gyro_sim.engine.simulator`: :class:`Simulator` (the model of a scene advanced by the compiled steppers);
-* :mod:`gyro_sim.engine.runner`: :class:`Runner` (breaks, ticks, samples, the error control).
+  :func:`controller_period`, :func:`stator_triad`, body rates, kinetic energy);
+* :mod:`gyro_sim.engine.result`: :class:`RunResult`.
 
 A run without attitude (:func:`integrates_attitude` False: ``output.attitude: false`` on an isotropic
 rotor without effects, full fidelity, no controller law that reads the attitude) integrates L and the eddy
@@ -23,9 +28,10 @@ from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.model import (_TABLEAU, AVERAGED_ERROR, DEFAULT_RATE_CHANGE, DEFAULT_STEPS_PER_TURN,  # noqa: F401
                                    FROZEN_FLOW_COST, LAWS_WITHOUT_ATTITUDE, _case_flag, _initial_attitude, _tableau,
                                    body_rates, controller_period, integrates_attitude, kinetic_energy, lawson8_cost,
-                                   output_times, stator_triad, system_energy)
+                                   stator_triad, system_energy)
 from gyro_sim.engine.result import RunResult, error_summary  # noqa: F401
 from gyro_sim.engine.runner import Runner
+from gyro_sim.engine.saving import output_times
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.scenes.scene import Scene
 

@@ -38,7 +38,7 @@ from gyro_sim.compiled import frozen_flow, kernels, qs_flow
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.compiled.effects import ON
 from gyro_sim.common.stamps import stamp_ns
-from gyro_sim.engine.model import _tableau
+from gyro_sim.engine.steppers import COMPILED_STEPPERS, arguments
 
 __all__ = ["TickLoop", "tick_loop", "advance", "python_ticks", "MAX_BREAKS"]
 
@@ -213,26 +213,10 @@ def breaks(Pf, Pz, Pa, Pq, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y
     return nb, steps, s, n_log
 
 
-#: the steppers the compiled loop links (:func:`stepper`); a segment of another (qs_flow) goes break by break
-COMPILED_STEPPERS = frozenset({"lawson8", "etdrk4", "frozen_flow", "free", "qs_flow"})
-
-
 def stepper(sim, seg: tuple) -> tuple:
     """(Pf, Pz, Pa, Pq): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
-    ``seg`` (:meth:`Simulator._segment`) in its slot, lawson8/ETDRK4, frozen_flow, free or qs_flow, the others
-    None; the argument types are advance's (numba compiles no new signature of the stepper)."""
-    t_seg, Bre, Bim, om, free, method, h_max = seg
-    case = None if sim.attitude else True
-    if method in ("frozen_flow", "qs_flow"):
-        ax = frozen_flow.supported(sim.J)
-        head = (Bre, Bim, om, sim.Jinv, sim.J[(ax + 1) % 3], sim.J[ax], ax, sim.c_m, sim.w, sim.tail)
-        if method == "qs_flow":
-            return None, None, None, (*head, case)  # (no effect runs in these flows: no eff)
-        return None, (*head, 1.0 / sim.tau, case), None, None
-    if free:
-        return None, None, (sim.Jinv, sim._inv_ref, sim._free_axis, sim.tau), None
-    A, b, c = _tableau(method)  # (made on first use: a tick loop may be a process's first lawson8 run)
-    return (Bre, Bim, om, sim.Jinv, sim.c_m, sim.w, sim.tail, sim.lam, sim.eff, A, b, c, case), None, None, None
+    ``seg`` (:meth:`Simulator._segment`) in its slot (:func:`gyro_sim.engine.steppers.arguments`)."""
+    return arguments(sim.terms, seg)
 
 
 class TickLoop:
@@ -264,9 +248,10 @@ class TickLoop:
         else:
             self.kind, self.fp, self.cl, self.rl = law.kind, law.fp, law.current_limit, law.rate_limit
             self.needs_time, self.reads_state = law.needs_time, law.reads_state
-            self.names = law.command_names(sim.stator_names)
-            self.axes = law.control_axes(sim.stator_names, np.cross(sim.e1, sim.e2))  # (the axes control_input gives)
-        self.idx = np.array([sim.stator_names.index(n) for n in self.names], dtype=np.int64)
+            terms = sim.terms
+            self.names = law.command_names(terms.stator_names)
+            self.axes = law.control_axes(terms.stator_names, np.cross(terms.e1, terms.e2))  # (control_input's axes)
+        self.idx = np.array([sim.terms.stator_names.index(n) for n in self.names], dtype=np.int64)
 
     def advance(self, until: Optional[float] = None) -> Optional[slice]:
         """Advance through the plain breaks ahead (up to :data:`MAX_BREAKS`, none after ``until`` s, as many as the
@@ -382,7 +367,7 @@ def tick_loop(r, law) -> Optional[TickLoop]:
     made afresh at each break), a law naming a stator the scene lacks (the Python loop then says so)."""
     if not _ENABLED[0] or law is not None and not isinstance(law, CompiledLaw):
         return None
-    if r.sim.eff[ON] != 0.0:
+    if r.sim.terms.eff[ON] != 0.0:
         return None
     try:
         return TickLoop(r, law)
