@@ -465,8 +465,9 @@ class ErrorControl:
         self.e_p = max(self.e_p, self.banked[2] + dp)
         dLn = self.dLn
         # the estimate's (denom_estimate): the same differences
-        self.est = tuple(max(e, b + x) for e, b, x in zip(self.est, self.banked_est,
-                                                           self._now(main, shadow, self.denom_estimate), strict=True))
+        now = self._now(main, shadow, self.denom_estimate)
+        self.est = (max(self.est[0], self.banked_est[0] + now[0]), max(self.est[1], self.banked_est[1] + now[1]),
+                    max(self.est[2], self.banked_est[2] + now[2]))
         self.dLn = dLn
         return dL, dq, dp, self.e_L, self.e_q, self.e_p
 
