@@ -81,8 +81,7 @@ class Runner:
                                     axis=symmetry_axis(self.sim.terms.J), accuracy=scene.accuracy)
         self.shadow = None
         if estimate:
-            self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
-            self.shadow.leader = self.sim
+            self.shadow = self.sim.follower()
         self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
         self._ck = 0  # the next check
         self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check

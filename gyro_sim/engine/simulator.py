@@ -102,6 +102,21 @@ class Simulator:
         if not quiet and not is_legacy() and warn_plan:
             self._warn_plan()
 
+    def follower(self) -> "Simulator":
+        """A shadow run of this one (the error control's: :class:`gyro_sim.engine.runner.Runner`): the same scene,
+        model and plan, its own state (a copy of this one's now) and its own step notes, following this simulator
+        (``leader``), quiet. Built from this simulator's parts instead of from the scene (no second validation,
+        mode plan, model or step plan: the same numbers, ~0.1 ms instead of ~0.5 ms)."""
+        sh = object.__new__(Simulator)
+        sh.__dict__.update(self.__dict__)
+        sh.quiet, sh.step_div, sh.leader, sh.lead_gap = True, 1.0, self, math.inf
+        sh.terms = self.terms.copy()
+        sh.current, sh.rate, sh.phase, sh.y = self.current.copy(), self.rate.copy(), self.phase.copy(), self.y.copy()
+        sh._seg, sh._seg_t_end = None, math.nan
+        sh.steps, sh.call_steps = 0, steppers.CALL_STEPS[0]
+        sh.step_size = self.step_size.copy(sh.terms, quiet=True)
+        return sh
+
     def state(self) -> State:
         """The state a step is planned from (:class:`gyro_sim.engine.step_size.State`; its arrays are this
         simulator's, not copies)."""

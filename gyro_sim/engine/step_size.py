@@ -15,6 +15,7 @@ state of the run but its own notes (the steppers used, the warnings given, the s
 """
 from __future__ import annotations
 
+import copy
 import math
 from typing import NamedTuple, Optional
 
@@ -81,6 +82,15 @@ class StepSize:
         self.rates = (om_plan, om_free)  # (plan_for: the plan at other tolerances)
         self.step_plan = step_plan(scene, self.horizon, self.attitude, om_plan, om_free)
         self.auto_plan = auto_plan(self.step_plan, scene)
+
+    def copy(self, terms, quiet: bool) -> "StepSize":
+        """The same plan for another simulator of the same run (a shadow) with model ``terms``: its own notes
+        (steppers used, slip met, warnings, the kept torque time), ``quiet`` or not."""
+        other = copy.copy(self)
+        other.terms, other.quiet = terms, quiet
+        other.slip_met, other._slip_warned, other.methods_used, other._knob_warned = 0.0, False, set(), set()
+        other._tt = None
+        return other
 
     # --- a segment's stepper and step ----------------------------------------------------------------
     def plan(self, free: bool, st: State, step_div: float = 1.0, lead: Optional[Lead] = None) -> tuple[str, float]:

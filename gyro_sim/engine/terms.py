@@ -10,6 +10,7 @@ The state (t, y, stator currents, rates and phases) is not held here: it is the
 """
 from __future__ import annotations
 
+import copy
 import math
 from typing import Optional
 
@@ -111,6 +112,14 @@ class Terms:
             self.free_axis = -3  # isotropic, modes in the case frame (kernels.free_step)
         self.inv_ref = 1.0 / ref
         self._ph: Optional[tuple] = None  # (phasors: the last ones, with their key)
+
+    def copy(self) -> "Terms":
+        """A copy for another simulator of the same run (a shadow): the arrays are shared (read only), but for the
+        effects' vector (the steppers write its time into it) and the kept phasors."""
+        other = copy.copy(self)
+        other.eff = self.eff.copy()
+        other._ph = None
+        return other
 
     # --- the state -------------------------------------------------------------------------------
     def initial_state(self) -> np.ndarray:
