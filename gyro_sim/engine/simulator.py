@@ -22,6 +22,9 @@ from gyro_sim.scenes.limits import command_problem
 from gyro_sim.scenes.scene import Scene, check_valid
 
 
+_NO_RECORD = np.array([False])  # (advance to one stop, recording nothing: read only)
+
+
 def _model(name: str, doc: str) -> property:
     """A read-only view of the model's attribute ``name`` (:class:`~gyro_sim.engine.terms.Terms`)."""
     return property(lambda self: getattr(self.terms, name), doc=doc)
@@ -91,6 +94,7 @@ class Simulator:
         # the fields are switched on at t = 0 on a rotor free of eddy currents
         if terms.tau.size:
             terms.field_step(self.y, np.zeros(3), self.field_now())
+        self._no_rows = (np.zeros((1, self.y.size)), np.zeros((1, 3)))  # (advance's rows where it records nothing)
         self.steps = 0
         self.call_steps = steppers.CALL_STEPS[0]  # most steps of one stepper call (tuned to CALL_WALL s a call)
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None]
@@ -285,9 +289,8 @@ class Simulator:
             raise ValueError(f"advance: t_end = {t_end} is before the present time {self.t}")
         if sample_times is None or len(sample_times) == 0:
             stops = np.array([t_end])
-            record = np.array([False])
-            out_y = np.zeros((1, self.y.size))
-            out_N = np.zeros((1, 3))
+            record = _NO_RECORD
+            out_y, out_N = self._no_rows  # (nothing is recorded into them)
         else:
             stops = np.asarray(sample_times, dtype=float)
             record = np.ones(stops.size, dtype=np.bool_)
