@@ -439,7 +439,8 @@ class ErrorControl:
     def note_L(self, L_norm: float) -> None:
         self.L_max = max(self.L_max, L_norm)
 
-    def _now(self, main, shadow, den: Optional[float] = None, raw: Optional[tuple] = None) -> tuple[float, float, float]:
+    def _now(self, main, shadow, den: Optional[float] = None,
+             raw: Optional[tuple] = None) -> tuple[float, float, float]:
         """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
         shadow (:func:`gyro_sim.physics.frames.attitude_split_one`); ``self.dLn``: the error of |L| (what turns the
         spin and precession rates: the phases drift at it over J). ``raw``: :meth:`_diff` of the pair, if known."""
