@@ -81,8 +81,7 @@ class Runner:
                                     axis=symmetry_axis(self.sim.terms.J), accuracy=scene.accuracy)
         self.shadow = None
         if estimate:
-            self.shadow = Simulator(scene, attitude, horizon=H, quiet=True)
-            self.shadow.leader = self.sim
+            self.shadow = self.sim.follower()
         self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
         self._ck = 0  # the next check
         self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
@@ -183,7 +182,8 @@ class Runner:
             cur, rate = due.get(c.stator, (None, None))
             due[c.stator] = (c.current if c.current is not None else cur, c.rate if c.rate is not None else rate)
             self._ci += 1
-        self.apply_commands(due)  # one command message per instant
+        if due:
+            self.apply_commands(due)  # one command message per instant
 
     def record_initial(self) -> slice:
         """Record the sample at t = 0 (after the scene's commands of t = 0). Returns its row slice."""
@@ -234,7 +234,8 @@ class Runner:
         else:
             self._bi += 1
         t_out, row = self.t_out, self.row
-        sel = t_out[row:][t_out[row:] <= tb + 1e-12 * max(1.0, tb)]
+        # the samples up to the break and within round-off past it (t_out is sorted)
+        sel = t_out[row:max(row, int(np.searchsorted(t_out, tb + 1e-12 * max(1.0, tb), side="right")))]
         sim = self.sim
         t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
         out = slice(row, row + sel.size)
@@ -278,9 +279,9 @@ class Runner:
             self._ck += 1
             # |N| now and its mean since the previous check; whether the shadow's steps were longer there
             # (from the states at the checks alone: the same in every run, whatever its samples)
-            n_now = float(np.linalg.norm(sim.torque())) if not seg[1][4] else 0.0
+            n_now = _norm(sim.torque()) if not seg[1][4] else 0.0
             L0, t0, st0, sst0 = self._at_check
-            n_mean = float(np.linalg.norm(sim.y[0:3] - L0)) / (tb - t0) if tb > t0 else n_now
+            n_mean = _norm(sim.y[0:3] - L0) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
             self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
             f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, turned=self._turned)
@@ -333,23 +334,24 @@ class Runner:
                                  exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min, finer=finer)
         self._steps_seen = sim.steps
 
-    def _check_samples(self, sel: np.ndarray, r: slice) -> int:
+    def _check_samples(self, sel: np.ndarray, r: slice) -> tuple[int, np.ndarray]:
         """How many of the new output samples (times ``sel``, buffer rows ``r``) hold a sound state: finite (L, the
         attitude where it is integrated, the eddy modes and effects' states, the torque) with |L| within
         :attr:`L_sound` (:func:`gyro_sim.scenes.limits.L_limit`: what the fields can drive; the kinetic energy is at
-        most |L|²/(2 J_min)). At the first that does not, the run fails: :attr:`failure` says what and when, the
-        output ends with the sample before (:attr:`row`) and :attr:`done` is True."""
+        most |L|²/(2 J_min)), and their |L| (N m s). At the first that does not, the run fails: :attr:`failure` says
+        what and when, the output ends with the sample before (:attr:`row`) and :attr:`done` is True."""
         y = self.out_y[r]
-        ok = np.isfinite(y[:, 0:3]).all(axis=1) & np.isfinite(y[:, 7:]).all(axis=1) & \
-            np.isfinite(self.out_N[r]).all(axis=1)
-        if self.sim.attitude:
-            ok &= np.isfinite(y[:, 3:7]).all(axis=1)
+        if self.sim.attitude:  # (every column of y: L, q, the modes and effects' states)
+            ok = np.isfinite(y).all(axis=1) & np.isfinite(self.out_N[r]).all(axis=1)
+        else:
+            ok = np.isfinite(y[:, 0:3]).all(axis=1) & np.isfinite(y[:, 7:]).all(axis=1) & \
+                np.isfinite(self.out_N[r]).all(axis=1)
         with np.errstate(invalid="ignore", over="ignore"):
             Ln = np.linalg.norm(y[:, 0:3], axis=1)
         big = ok & (Ln > self.L_sound)
+        if ok.all() and not big.any():
+            return sel.size, Ln
         bad = np.flatnonzero(~ok | big)
-        if not bad.size:
-            return sel.size
         i = int(bad[0])
         if big[i]:
             what = (f"|L| = {Ln[i]:.3g} N m s, beyond the {self.L_sound:.3g} N m s the fields can drive "
@@ -362,31 +364,37 @@ class Runner:
             what = f"the state is not finite ({', '.join(parts)})"
         self.failure = f"failed: {what} at t = {float(sel[i]):.9g} s"
         self.row = self._base + r.start + i
-        return i
+        return i, Ln[:i]
 
     def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate),
         after checking them (:meth:`_check_samples`: a broken state ends the run)."""
         if not sel.size:
             return
-        n = self._check_samples(sel, slice(rows.start, rows.start + sel.size))
-        sel = sel[:n]
-        if not sel.size:
+        n, Ln = self._check_samples(sel, slice(rows.start, rows.start + sel.size))
+        if not n:
             return
-        r = slice(rows.start, rows.start + sel.size)
-        Ln = np.linalg.norm(self.out_y[r, 0:3], axis=1)
-        self.control.note_L(float(np.max(Ln)))
-        dt = np.diff(np.concatenate([[self._last_t], sel]))
-        om = Ln * float(np.max(self.sim.terms.Jinv))
-        # (sequential sums, as one sample at a time would give: the same bits whether samples are breaks or not)
-        self._turned = float(np.cumsum(np.concatenate([[self._turned], om * dt]))[-1])
+        # (sequential sums in time order, sample by sample: the same bits whether samples are breaks or not; scalar
+        # code, a few samples a call)
+        ts, Ls = sel[:n].tolist(), Ln.tolist()
+        self.control.note_L(max(Ls))
+        jmax = self.sim.terms.Jinv_max
+        prev, turned = self._last_t, self._turned
         if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
-            self._last_t = float(sel[-1])
-            return
-        N = np.linalg.norm(self.out_N[r], axis=1)
-        self._impulse = float(np.cumsum(np.concatenate([[self._impulse], N * dt]))[-1])
-        self._spin_dev = float(np.cumsum(np.concatenate([[self._spin_dev], np.abs(om - self._om0) * dt]))[-1])
-        self._last_t = float(sel[-1])
+            for t, L in zip(ts, Ls):
+                turned += L * jmax * (t - prev)
+                prev = t
+        else:
+            N = np.linalg.norm(self.out_N[rows.start:rows.start + n], axis=1).tolist()
+            imp, dev, om0 = self._impulse, self._spin_dev, self._om0
+            for t, L, Nk in zip(ts, Ls, N):
+                dt, om = t - prev, L * jmax
+                turned += om * dt
+                imp += Nk * dt
+                dev += abs(om - om0) * dt
+                prev = t
+            self._impulse, self._spin_dev = imp, dev
+        self._turned, self._last_t = turned, prev
 
     def resync_shadow(self) -> None:
         """The run's state was set from outside (a fidelity hand-over): keep the errors so far and start the
@@ -406,7 +414,7 @@ class Runner:
         else the plan's model), the eddy modes' truncation at the largest slip met, the averaged models' O(ε)."""
         sim, acc = self.sim, self.scene.accuracy
         ctl = self.control
-        L_max = max(ctl.L_max, float(np.linalg.norm(sim.y[0:3])), 1e-300)
+        L_max = max(ctl.L_max, _norm(sim.y[0:3]), 1e-300)
         if self.shadow is not None:
             if self.shadow.t == sim.t:
                 ctl.measure(sim, self.shadow)
@@ -521,6 +529,12 @@ class Runner:
         return run_result(self.scene, self.sim.terms, self.sim.attitude, self.samples(slice(0, self.row), euler=False),
                           self.sim.steps, list(self.command_log), self.wall_time, self.compile_time,
                           None if self.failure is not None else self.error_estimate(), self.failure)
+
+
+def _norm(v: np.ndarray) -> float:
+    """|v| of a 3-vector as np.linalg.norm takes it (the square root of its dot product: the same bits), without
+    its overhead."""
+    return math.sqrt(float(v.dot(v)))
 
 
 def _holds(times: np.ndarray, t: float) -> bool:

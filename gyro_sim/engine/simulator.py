@@ -22,6 +22,9 @@ from gyro_sim.scenes.limits import command_problem
 from gyro_sim.scenes.scene import Scene, check_valid
 
 
+_NO_RECORD = np.array([False])  # (advance to one stop, recording nothing: read only)
+
+
 def _model(name: str, doc: str) -> property:
     """A read-only view of the model's attribute ``name`` (:class:`~gyro_sim.engine.terms.Terms`)."""
     return property(lambda self: getattr(self.terms, name), doc=doc)
@@ -91,6 +94,7 @@ class Simulator:
         # the fields are switched on at t = 0 on a rotor free of eddy currents
         if terms.tau.size:
             terms.field_step(self.y, np.zeros(3), self.field_now())
+        self._no_rows = (np.zeros((1, self.y.size)), np.zeros((1, 3)))  # (advance's rows where it records nothing)
         self.steps = 0
         self.call_steps = steppers.CALL_STEPS[0]  # most steps of one stepper call (tuned to CALL_WALL s a call)
         self._nu_max = max([abs(s.rate) for s in st] + [abs(c.rate) for c in scene.commands if c.rate is not None]
@@ -101,6 +105,21 @@ class Simulator:
         # (warn_plan False: the caller warns, StepSize.warn_plan, once the step budget has passed the plan: Runner)
         if not quiet and not is_legacy() and warn_plan:
             self._warn_plan()
+
+    def follower(self) -> "Simulator":
+        """A shadow run of this one (the error control's: :class:`gyro_sim.engine.runner.Runner`): the same scene,
+        model and plan, its own state (a copy of this one's now) and its own step notes, following this simulator
+        (``leader``), quiet. Built from this simulator's parts instead of from the scene (no second validation,
+        mode plan, model or step plan: the same numbers, ~0.1 ms instead of ~0.5 ms)."""
+        sh = object.__new__(Simulator)
+        sh.__dict__.update(self.__dict__)
+        sh.quiet, sh.step_div, sh.leader, sh.lead_gap = True, 1.0, self, math.inf
+        sh.terms = self.terms.copy()
+        sh.current, sh.rate, sh.phase, sh.y = self.current.copy(), self.rate.copy(), self.phase.copy(), self.y.copy()
+        sh._seg, sh._seg_t_end = None, math.nan
+        sh.steps, sh.call_steps = 0, steppers.CALL_STEPS[0]
+        sh.step_size = self.step_size.copy(sh.terms, quiet=True)
+        return sh
 
     def state(self) -> State:
         """The state a step is planned from (:class:`gyro_sim.engine.step_size.State`; its arrays are this
@@ -270,9 +289,8 @@ class Simulator:
             raise ValueError(f"advance: t_end = {t_end} is before the present time {self.t}")
         if sample_times is None or len(sample_times) == 0:
             stops = np.array([t_end])
-            record = np.array([False])
-            out_y = np.zeros((1, self.y.size))
-            out_N = np.zeros((1, 3))
+            record = _NO_RECORD
+            out_y, out_N = self._no_rows  # (nothing is recorded into them)
         else:
             stops = np.asarray(sample_times, dtype=float)
             record = np.ones(stops.size, dtype=np.bool_)

@@ -15,6 +15,7 @@ state of the run but its own notes (the steppers used, the warnings given, the s
 """
 from __future__ import annotations
 
+import copy
 import math
 from typing import NamedTuple, Optional
 
@@ -22,7 +23,7 @@ import numpy as np
 
 from gyro_sim.compiled import effects, frozen_flow, qs_flow
 from gyro_sim.engine.model import FROZEN_FLOW_COST, lawson8_cost
-from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.physics.frames import _column
 from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan, field_rates,
                                       is_legacy, step_plan)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
@@ -69,6 +70,7 @@ class StepSize:
         self.methods_used: set = set()
         self._knob_warned: set = set()
         self._tt: Optional[tuple] = None  # (torque_time: the last one, with its key)
+        self._qs: Optional[bool] = None  # (qs_applies: the scene's part)
         # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/scenes/accuracy.py): turns of the
         # fastest rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body
         # motion
@@ -81,6 +83,15 @@ class StepSize:
         self.rates = (om_plan, om_free)  # (plan_for: the plan at other tolerances)
         self.step_plan = step_plan(scene, self.horizon, self.attitude, om_plan, om_free)
         self.auto_plan = auto_plan(self.step_plan, scene)
+
+    def copy(self, terms, quiet: bool) -> "StepSize":
+        """The same plan for another simulator of the same run (a shadow) with model ``terms``: its own notes
+        (steppers used, slip met, warnings, the kept torque time), ``quiet`` or not."""
+        other = copy.copy(self)
+        other.terms, other.quiet = terms, quiet
+        other.slip_met, other._slip_warned, other.methods_used, other._knob_warned = 0.0, False, set(), set()
+        other._tt = None
+        return other
 
     # --- a segment's stepper and step ----------------------------------------------------------------
     def plan(self, free: bool, st: State, step_div: float = 1.0, lead: Optional[Lead] = None) -> tuple[str, float]:
@@ -131,7 +142,7 @@ class StepSize:
                     h, held = terms.tau_min, True
                 else:
                     m, h = "etdrk4", h_etd
-            if frozen_flow.supported(terms.J) >= 0 and terms.eff[effects.ON] == 0.0:
+            if terms.sym_axis >= 0 and terms.eff[effects.ON] == 0.0:
                 # decided at both steppers' settings for the scene's accuracy (the choice follows the physics
                 # and the tolerance; the scene's explicit knobs then set the chosen stepper's accuracy)
                 ap = self.auto_plan
@@ -156,7 +167,9 @@ class StepSize:
         measured no larger on every quasi-static scene (docs/numerics.md). Where frozen_flow does not pay, lawson8
         stays: its error is the predictable one (it resolves the field's ripple): on reorient_L qs_flow takes 403 699
         steps (2.6 s CPU) against lawson8's 10 319 (0.18 s), docs/accuracy.md."""
-        return not is_legacy() and qs_flow.applies(self.scene, self.terms.J, self.terms.eff[effects.ON] != 0.0)
+        if self._qs is None:  # (the scene's and the model's part: fixed over the run)
+            self._qs = qs_flow.applies(self.scene, self.terms.J, self.terms.eff[effects.ON] != 0.0)
+        return not is_legacy() and self._qs
 
     def h_for(self, method: str, st: State) -> float:
         """The largest step (s) of ``method`` from state ``st``, at the plan's knobs (lawson8 in auto mode: held at
@@ -185,7 +198,7 @@ class StepSize:
                 rate = L * np.max(np.abs(terms.Jinv - terms.inv_ref))
                 h = 2 * math.pi / (spt * rate) if rate > 0 else math.inf
         else:
-            om = max(L * max(terms.Jinv), st.nu_max, max(terms.field_om, default=0.0), terms.effect_rate(st.t, y))
+            om = max(L * terms.Jinv_max, st.nu_max, terms.field_om_max, terms.effect_rate(st.t, y))
             h = 2 * math.pi / (spt * om) if om > 0 else math.inf
         if self.scene.integrator.max_step is not None:
             h = min(h, self.scene.integrator.max_step)
@@ -207,7 +220,8 @@ class StepSize:
         axisymmetric or isotropic rotor with symmetry axis ``ax`` (:func:`gyro_sim.frozen_flow.supported`)."""
         terms, y = self.terms, st.y
         Jt, Ja = float(terms.J[(ax + 1) % 3]), float(terms.J[ax])
-        e_a = quat_to_matrix(y[3:7])[:, ax] if self.attitude and Jt != Ja else None
+        # (the axis in the case frame: quat_to_matrix's column in scalar code, the same bits)
+        e_a = np.array(_column(*y[3:7].tolist(), ax)) if self.attitude and Jt != Ja else None
         Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
         return frozen_flow.torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a, terms.c_m, terms.w, terms.tau, terms.tail)
 
@@ -226,10 +240,10 @@ class StepSize:
         # |B_p| a general field term (scalar code: this is asked once per command segment)
         B = sum(math.sqrt(2.0) * b * c for b, c in zip(terms.b.tolist(), st.current.tolist(), strict=True) if c > 0)
         B += sum(float(np.linalg.norm(f)) for f in terms.field_B) if terms.field_B.size else 0.0
-        om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * max(terms.Jinv.tolist()),
+        om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * terms.Jinv_max,
                  st.nu_max, max((abs(f) for f in terms.field_om.tolist()), default=0.0))
         N = terms.c_m * B * B * (0.5 * sum(abs(v) for v in terms.w.tolist()) + terms.tail * (om + st.nu_max))
-        ax = frozen_flow.supported(terms.J)
+        ax = terms.sym_axis
         if N > 0 and terms.w.size and ax >= 0:
             # the mean torque at the present slips, no larger than the bound: a spin-up's step grows as its slip falls
             # (the eddy-mode models; qs_flow's plan and auto's choice of it were measured at the bound: on
@@ -249,7 +263,7 @@ class StepSize:
         plan = self.auto_plan if plan is None else plan
         terms = self.terms
         steps = min(plan.turns * plan.steps_per_turn["lawson8"], plan.turns * plan.steps_per_turn["etdrk4"])
-        if frozen_flow.supported(terms.J) >= 0 and terms.eff[effects.ON] == 0.0 and terms.c_m > 0:
+        if terms.sym_axis >= 0 and terms.eff[effects.ON] == 0.0 and terms.c_m > 0:
             steps = min(steps, self.horizon / self.frozen_flow_step(st, plan.rate_change))
         return float(steps)
 
@@ -313,7 +327,8 @@ class StepSize:
         warn once where it passes the slip the eddy modes were chosen for (a command or law beyond the scene's
         rates: gyro_sim.accuracy.mode_plan) and the modes then miss the tolerance."""
         y = st.y
-        slip = float(np.max(np.abs(om), initial=0.0)) + float(np.linalg.norm(y[0:3])) * float(np.max(self.terms.Jinv))
+        L = y[0:3]  # (|L| as np.linalg.norm takes it, the same bits: sqrt of the dot product)
+        slip = max(map(abs, om.tolist()), default=0.0) + math.sqrt(float(L.dot(L))) * self.terms.Jinv_max
         self.slip_met = max(self.slip_met, slip)
         mp = self.mode_plan
         if (self._slip_warned or self.quiet or mp.kind in (None, "thin_shell") or mp.n == 0

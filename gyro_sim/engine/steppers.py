@@ -57,11 +57,11 @@ def arguments(terms, seg: Segment) -> tuple:
     t_seg, Bre, Bim, om, free, method, h_max = seg
     case = None if terms.attitude else True
     if method in ("frozen_flow", "qs_flow"):
-        ax = frozen_flow.supported(terms.J)
+        ax = terms.sym_axis
         head = (Bre, Bim, om, terms.Jinv, terms.J[(ax + 1) % 3], terms.J[ax], ax, terms.c_m, terms.w, terms.tail)
         if method == "qs_flow":
             return None, None, None, (*head, case)  # (no effect runs in these flows: no eff)
-        return None, (*head, 1.0 / terms.tau, case), None, None
+        return None, (*head, terms.inv_tau, case), None, None
     if free:
         return None, None, (terms.Jinv, terms.inv_ref, terms.free_axis, terms.tau), None
     A, b, c = _tableau(method)  # (made on first use: a tick loop may be a process's first lawson8 run)
@@ -85,7 +85,7 @@ def integrate(terms, y: np.ndarray, t0: float, t_end: float, seg: Segment, stops
         h_max = max(t_end - t0, 1e-300)
     pos = np.zeros(3)
     case = _case_flag(terms.attitude)
-    ax = frozen_flow.supported(terms.J) if method in ("frozen_flow", "qs_flow") else 0
+    ax = terms.sym_axis if method in ("frozen_flow", "qs_flow") else 0
     tab = None if method in ("frozen_flow", "qs_flow") or free else _tableau(method)
     J, Jinv = terms.J, terms.Jinv
     n = stops.size
@@ -95,7 +95,7 @@ def integrate(terms, y: np.ndarray, t0: float, t_end: float, seg: Segment, stops
         if method == "frozen_flow":
             k_out, steps = frozen_flow.integrate_frozen(
                 y, t0, t_seg, stops, record, h_max, Bre, Bim, om, Jinv, J[(ax + 1) % 3], J[ax], ax, terms.c_m,
-                terms.w, terms.tail, 1.0 / terms.tau, out_y, out_N, k_out, *case, pos, budget)
+                terms.w, terms.tail, terms.inv_tau, out_y, out_N, k_out, *case, pos, budget)
         elif method == "qs_flow":
             k_out, steps = qs_flow.integrate_qs(
                 y, t0, t_seg, stops, record, h_max, Bre, Bim, om, Jinv, J[(ax + 1) % 3], J[ax], ax, terms.c_m,

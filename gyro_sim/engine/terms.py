@@ -10,6 +10,7 @@ The state (t, y, stator currents, rates and phases) is not held here: it is the
 """
 from __future__ import annotations
 
+import copy
 import math
 from typing import Optional
 
@@ -18,7 +19,7 @@ import numpy as np
 from gyro_sim.compiled import effects, kernels
 from gyro_sim.engine.model import _initial_attitude, body_rates, stator_triad
 from gyro_sim.physics.conductor import DEFAULT_N_MODES, conductor_model
-from gyro_sim.physics.frames import quat_to_matrix
+from gyro_sim.physics.frames import quat_to_matrix, symmetry_axis
 from gyro_sim.scenes.accuracy import truncated_model
 from gyro_sim.scenes.limits import stator_limits
 from gyro_sim.scenes.scene import Scene
@@ -111,6 +112,19 @@ class Terms:
             self.free_axis = -3  # isotropic, modes in the case frame (kernels.free_step)
         self.inv_ref = 1.0 / ref
         self._ph: Optional[tuple] = None  # (phasors: the last ones, with their key)
+        # --- scalars the step plan asks for at every segment (Python floats: no NumPy call there)
+        self.sym_axis = symmetry_axis(J)  # the symmetry axis (frozen_flow.supported: −1 triaxial)
+        self.Jinv_max = max(self.Jinv.tolist())  # 1/(kg m²)
+        self.field_om_max = max(self.field_om.tolist(), default=0.0)  # the general field's largest ω_p (rad/s)
+        self.inv_tau = 1.0 / self.tau  # the modes' rates (1/s; the frozen-flow stepper's argument)
+
+    def copy(self) -> "Terms":
+        """A copy for another simulator of the same run (a shadow): the arrays are shared (read only), but for the
+        effects' vector (the steppers write its time into it) and the kept phasors."""
+        other = copy.copy(self)
+        other.eff = self.eff.copy()
+        other._ph = None
+        return other
 
     # --- the state -------------------------------------------------------------------------------
     def initial_state(self) -> np.ndarray:

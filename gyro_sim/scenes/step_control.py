@@ -439,33 +439,42 @@ class ErrorControl:
     def note_L(self, L_norm: float) -> None:
         self.L_max = max(self.L_max, L_norm)
 
-    def _now(self, main, shadow, den: Optional[float] = None) -> tuple[float, float, float]:
+    def _now(self, main, shadow, den: Optional[float] = None,
+             raw: Optional[tuple] = None) -> tuple[float, float, float]:
         """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
         shadow (:func:`gyro_sim.physics.frames.attitude_split_one`); ``self.dLn``: the error of |L| (what turns the
-        spin and precession rates: the phases drift at it over J)."""
+        spin and precession rates: the phases drift at it over J). ``raw``: :meth:`_diff` of the pair, if known."""
         den = self.denom if den is None else den
         if not math.isfinite(den):
             self.dLn = 0.0
             return 0.0, 0.0, 0.0
+        dLn, dL, dq, dp = self._diff(main, shadow) if raw is None else raw
+        self.dLn = dLn / den
+        return dL / den, dq / den, dp / den
+
+    def _diff(self, main, shadow) -> tuple[float, float, float, float]:
+        """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase)."""
         L, Ls = main.y[0:3], shadow.y[0:3]
-        self.dLn = abs(float(np.linalg.norm(L)) - float(np.linalg.norm(Ls))) / den
-        dL = float(np.linalg.norm(L - Ls)) / den
+        dL = L - Ls  # (|v| as np.linalg.norm takes it: the square root of the dot product, the same bits)
+        dLn = abs(math.sqrt(float(L.dot(L))) - math.sqrt(float(Ls.dot(Ls))))
         dq = dp = 0.0
         if self.attitude:
             d, p = attitude_split_one(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
-            dq, dp = float(d) / den, float(p) / den
-        return dL, dq, dp
+            dq, dp = float(d), float(p)
+        return dLn, math.sqrt(float(dL.dot(dL))), dq, dp
 
     def measure(self, main, shadow) -> tuple[float, float, float, float, float, float]:
         """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
-        self.L_max = max(self.L_max, float(np.linalg.norm(main.y[0:3])))
-        dL, dq, dp = self._now(main, shadow)
+        L = main.y[0:3]
+        self.L_max = max(self.L_max, math.sqrt(float(L.dot(L))))
+        raw = self._diff(main, shadow)
+        dL, dq, dp = self._now(main, shadow, raw=raw)
         self.dL = max(self.dL, self.banked[0] + dL)
         self.e_q = max(self.e_q, self.banked[1] + dq)
         self.e_p = max(self.e_p, self.banked[2] + dp)
         dLn = self.dLn
         # the estimate's (denom_estimate): the same differences
-        now = self._now(main, shadow, self.denom_estimate)
+        now = self._now(main, shadow, self.denom_estimate, raw)
         self.est = (max(self.est[0], self.banked_est[0] + now[0]), max(self.est[1], self.banked_est[1] + now[1]),
                     max(self.est[2], self.banked_est[2] + now[2]))
         self.dLn = dLn
@@ -531,7 +540,7 @@ class ErrorControl:
                 # a relative phase tolerance follows the phase the run turns: so far, and ahead at today's rate (the
                 # plan's took the fastest rate the run can reach over all of it; the early checks, where a spin-up
                 # has turned little, keep the plan's)
-                om_now = float(np.linalg.norm(main.y[0:3])) / self.J_min
+                om_now = math.sqrt(float(main.y[0:3].dot(main.y[0:3]))) / self.J_min
                 tol_p = min(tol_p, STEP_SHARE * phase_tolerance(acc, 1.0, turned + om_now * left))
             for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, k_cone), (tol_p, e_p, dp, dp0, 1.0)):
                 if not math.isfinite(tol):
