@@ -310,10 +310,12 @@ def test_full_disk_in_the_simulator_node(tmp_path):
         "scene": long_scene(tmp_path), "mode": "freerun", "duration": 100000.0, "expect_controller": "false",
         "progress": "false", "record": str(disk / "bag")})
     # the disk fills from outside once the bag has written its first chunks (another process filling it, as in
-    # life; the bag holds a few chunks by then): the node meets ENOSPC within seconds, not after writing 16 MiB itself at its freerun pace (85 s)
+    # life; the bag holds a few chunks by then): the node meets ENOSPC within seconds, not after writing 16 MiB
+    # itself at its freerun pace (85 s)
     fill = (f"{shlex.join(cmd)} & pid=$!; "
             f"while [ \"$(cat {disk}/bag/*.mcap 2>/dev/null | wc -c)\" -lt 100000 ] && kill -0 $pid 2>/dev/null; "
-            f"do sleep 0.2; done; dd if=/dev/zero of={disk}/filler bs=64k 2>/dev/null; wait $pid; rc=$?; rm -f {disk}/filler; "
+            f"do sleep 0.2; done; dd if=/dev/zero of={disk}/filler bs=64k 2>/dev/null; "
+            f"wait $pid; rc=$?; rm -f {disk}/filler; "
             f"(exit $rc)")
     p = _in_tmpfs(tmp_path, "20m", fill, env=ros_env(unique_domain()))
     assert p.returncode == 1, p.stderr[-3000:]

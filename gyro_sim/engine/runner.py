@@ -381,13 +381,13 @@ class Runner:
         jmax = self.sim.terms.Jinv_max
         prev, turned = self._last_t, self._turned
         if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
-            for t, L in zip(ts, Ls):
+            for t, L in zip(ts, Ls, strict=True):
                 turned += L * jmax * (t - prev)
                 prev = t
         else:
             N = np.linalg.norm(self.out_N[rows.start:rows.start + n], axis=1).tolist()
             imp, dev, om0 = self._impulse, self._spin_dev, self._om0
-            for t, L, Nk in zip(ts, Ls, N):
+            for t, L, Nk in zip(ts, Ls, N, strict=True):
                 dt, om = t - prev, L * jmax
                 turned += om * dt
                 imp += Nk * dt

@@ -221,7 +221,10 @@ class StepSize:
         terms, y = self.terms, st.y
         Jt, Ja = float(terms.J[(ax + 1) % 3]), float(terms.J[ax])
         # (the axis in the case frame: quat_to_matrix's column in scalar code, the same bits)
-        e_a = np.array(_column(*y[3:7].tolist(), ax)) if self.attitude and Jt != Ja else None
+        e_a: Optional[np.ndarray] = None
+        if self.attitude and Jt != Ja:
+            w, x, yq, z = (float(v) for v in y[3:7])
+            e_a = np.array(_column(w, x, yq, z, ax))
         Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
         return frozen_flow.torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a, terms.c_m, terms.w, terms.tau, terms.tail)
 
