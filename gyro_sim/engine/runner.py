@@ -87,6 +87,7 @@ class Runner:
         self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
         self._steps_seen = 0
         self._impulse = 0.0  # ∫|N| dt over the output samples (N·m·s): the modes' error of L
+        self._L_seen = self.sim.y[0:3].copy()  # L at the last output sample (N·m·s)
         self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
         self._turned = 0.0  # ∫ |Ω| dt over the output samples (rad, |Ω| ≤ |L|/J_min): the phase the rotor turns
         self._last_t = 0.0
@@ -385,12 +386,17 @@ class Runner:
                 turned += L * jmax * (t - prev)
                 prev = t
         else:
-            N = np.linalg.norm(self.out_N[rows.start:rows.start + n], axis=1).tolist()
+            r = slice(rows.start, rows.start + n)
+            N = np.linalg.norm(self.out_N[r], axis=1).tolist()
+            # (over a sample interval ∫|N| dt ≥ |ΔL|: a torque that peaks between the samples, a field's switch-on,
+            # counts)
+            dL = np.linalg.norm(np.diff(np.vstack([self._L_seen, self.out_y[r, 0:3]]), axis=0), axis=1).tolist()
+            self._L_seen = self.out_y[r.stop - 1, 0:3].copy()
             imp, dev, om0 = self._impulse, self._spin_dev, self._om0
-            for t, L, Nk in zip(ts, Ls, N, strict=True):
+            for t, L, Nk, dLk in zip(ts, Ls, N, dL, strict=True):
                 dt, om = t - prev, L * jmax
                 turned += om * dt
-                imp += Nk * dt
+                imp += max(Nk * dt, dLk)
                 dev += abs(om - om0) * dt
                 prev = t
             self._impulse, self._spin_dev = imp, dev
@@ -441,9 +447,15 @@ class Runner:
         e_g, e_im = sim.mode_plan.error_at(max(sim.slip_met, 0.0))
         mL = max(e_g, e_im) * self._impulse / L_max
         mq = e_im * self._spin_dev  # (a torque error turns the spin and precession rates: phases, directions)
+        kL, kq = sim.mode_plan.step_error(sim.slip_met, sim.field_steps, sim.t, sim.terms.c_m, float(np.min(sim.J)))
+        # (the field steps' transients in the modes left out: an impulse, which tilts L and turns the spin rate)
+        mL, mp, mq = mL + kL / L_max, mq + kq, mq + kL / L_max
         aL = 0.0
         if self.averaged_eps:  # (only a hybrid run has averaged stretches: gyro_sim.fidelity imports SciPy's solvers)
             aL = AVERAGED_ERROR * max(self.averaged_eps)
+        # (relative to the true largest |L|, which may be the run's less its error: e / (1 − e) of it)
+        k = 1.0 / (1.0 - (sL + mL + aL)) if sL + mL + aL < 0.5 else 1.0
+        sL, mL, aL = k * sL, k * mL, k * aL
         att = sim.attitude and not self.averaged_eps
         # round-off: each step's phase update errs by ~u of the angle and of the unit quaternion, and the
         # conserved |L| and energy random-walk by u √n of themselves, which turns the phases' rates
@@ -455,9 +467,9 @@ class Runner:
                              steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
                              averaged_L=aL, steps_method=how, rtol=acc.rtol,
                              atol=math.nan if acc.attitude is None else acc.attitude,
-                             phase=(sp + mq + ro) if att and sym else math.nan,
+                             phase=(sp + mp + ro) if att and sym else math.nan,
                              steps_phase=sp if att and sym else math.nan,
-                             modes_phase=mq if att and sym else math.nan,
+                             modes_phase=mp if att and sym else math.nan,
                              phase_tol=phase_tol if att else math.nan, round_off=ro)
 
     # --- exact switching instants ------------------------------------------------------------

@@ -92,8 +92,11 @@ class Simulator:
         self.t = 0.0
         self._seg, self._seg_t_end = None, math.nan  # see _segment
         # the fields are switched on at t = 0 on a rotor free of eddy currents
+        # Σ |ΔB| |B_after|, Σ t |ΔB| |B_after|, Σ |ΔB × B_before|, Σ t |ΔB × B_before| of the field steps (T², T² s:
+        # the modes left out answer them, modal_truncation.step_times)
+        self.field_steps = np.zeros(4)
         if terms.tau.size:
-            terms.field_step(self.y, np.zeros(3), self.field_now())
+            self._field_step(np.zeros(3), self.field_now())
         self._no_rows = (np.zeros((1, self.y.size)), np.zeros((1, 3)))  # (advance's rows where it records nothing)
         self.steps = 0
         self.call_steps = steppers.CALL_STEPS[0]  # most steps of one stepper call (tuned to CALL_WALL s a call)
@@ -116,6 +119,7 @@ class Simulator:
         sh.quiet, sh.step_div, sh.leader, sh.lead_gap = True, 1.0, self, math.inf
         sh.terms = self.terms.copy()
         sh.current, sh.rate, sh.phase, sh.y = self.current.copy(), self.rate.copy(), self.phase.copy(), self.y.copy()
+        sh.field_steps = self.field_steps.copy()  # (its own sums: _field_step adds to them in place)
         sh._seg, sh._seg_t_end = None, math.nan
         sh.steps, sh.call_steps = 0, steppers.CALL_STEPS[0]
         sh.step_size = self.step_size.copy(sh.terms, quiet=True)
@@ -270,6 +274,9 @@ class Simulator:
     def _field_step(self, before: np.ndarray, after: np.ndarray) -> None:
         """The eddy modes' instant answer to a field step (:meth:`gyro_sim.engine.terms.Terms.field_step`)."""
         self.terms.field_step(self.y, before, after)
+        d = after - before
+        a, p = float(np.linalg.norm(d) * np.linalg.norm(after)), float(np.linalg.norm(np.cross(d, before)))
+        self.field_steps += (a, a * self.t, p, p * self.t)
 
     def phasors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(Bre, Bim, ω) of the field from now on, referred to s = t − self.t (case frame, T): read them, do not

@@ -111,6 +111,35 @@ def choose_modes(kind: str, r2: float, sigma: float, thickness: Optional[float],
     return MAX_MODES, tail, float(errs[tail][0][-1]), float(errs[tail][1][-1]), False
 
 
+@lru_cache(maxsize=256)
+def step_times(kind: str, r2: float, sigma: float, thickness: Optional[float], n: int,
+               slip: float) -> tuple[float, float]:
+    """(K, T_miss) s: what a field step ΔB costs the modal model of ``n`` modes in torque impulse, beyond the
+    steady-state error :func:`modal_error` bounds (issue 28; docs/accuracy.md, "The eddy modes at a field step").
+
+    A field step ΔB (a stator switched on, t = 0 included: the fields are switched on on a rotor free of eddy
+    currents) sets every mode e_k −= ΔB (the modes screen it, ĝ → −1); each then decays to its steady state over
+    τ_k. The modes k > n the truncated model leaves out do the same in the conductor, but its tail term
+    (−T_tail dB/dt) answers at once and keeps no memory of the step: the modes left out make a transient the model
+    lacks. From τ_k ė_k + e_k = −τ_k dB_b/dt in a field of amplitude B rotating at slip ω after the step, mode k's
+    transient moment, e_k(0+) − ĝ_k B = −ΔB/(1 − iωτ_k) for a step from no field, gives (× c = 2π r2³/μ0, × |B|²
+    for a switch-on) the torque impulse c w_k Im[τ_k/(1 − iωτ_k)²] |B|² = c w_k 2ωτ_k²/(1 + ω²τ_k²)² |B|²
+    (measured on spinup_solid_sphere: 5, 2, 10 modes against 172, the impulse 2.00 to 2.06 times the same
+    formula without the screening; test_estimate_honest). ``K``: the largest Σ_{k>n} of it over slips (0, slip],
+    per c |ΔB| |B_after|. A part of ΔB across the field there was makes a torque at once, not through the slip:
+    c w_k τ_k |ΔB × B_before| per mode, ``T_miss`` = Σ_{k>n} w_k τ_k per c |ΔB × B_before|. Modes beyond
+    :data:`MAX_MODES` count by the bound max_ω 2ωτ²/(1 + ω²τ²)² = (3√3/8) τ and their tail."""
+    if kind == "thin_shell" or not slip > 0:
+        return 0.0, 0.0
+    full = _full_model(kind, float(r2), float(sigma), None if thickness is None else float(thickness))
+    tau, w = full.tau[n:], full.weight[n:]
+    beyond = max(float(full.tail_tau), 0.0)  # Σ_{k>MAX_MODES} w_k τ_k ([M] (2.14); a shell's: (2.13)'s slope less)
+    om = slip * np.geomspace(1e-4, 1.0, _GRID)
+    wt = om[:, None] * tau[None, :]
+    k = np.sum(w * 2.0 * wt * tau / (1.0 + wt * wt) ** 2, axis=1) if tau.size else np.zeros(om.size)
+    return float(np.max(k)) + 3.0 * math.sqrt(3.0) / 8.0 * beyond, float(np.sum(w * tau)) + beyond
+
+
 def best_tail(kind: str, r2: float, sigma: float, thickness: Optional[float], n: int, slip: float) -> bool:
     """With ``n`` modes given: the tail choice with the smaller error up to ``slip`` (the tail unless it hurts)."""
     if kind == "thin_shell" or not slip > 0 or n > MAX_MODES:
@@ -157,6 +186,24 @@ class ModePlan:
         if self.kind is None or self.n == 0:
             return 0.0, 0.0
         return modal_error(self.kind, self.radius, self.sigma, self.thickness, self.n, self.tail, slip)
+
+    def step_times(self, slip: float) -> tuple[float, float]:
+        """(K, T_miss) s of this truncation up to ``slip`` (rad/s): the torque impulses a field step makes in the
+        modes left out and the truncated model lacks (:func:`step_times`; (0, 0) without modes or for a thin
+        shell)."""
+        if self.kind in (None, "thin_shell") or self.n == 0:
+            return 0.0, 0.0
+        return step_times(self.kind, self.radius, self.sigma, self.thickness, self.n, slip)
+
+    def step_error(self, slip: float, steps, t: float, c_m: float, J_min: float) -> tuple[float, float]:
+        """(N m s, rad): the torque impulse the field steps ``steps`` (Σ |ΔB| |B_after|, Σ t_k |ΔB| |B_after|,
+        Σ |ΔB × B_before|, Σ t_k |ΔB × B_before|; T², T² s) made in the modes left out, and the phase it has
+        turned by now (``t`` s; the spin rate errs by the impulse over J from each step on)."""
+        K, T_miss = self.step_times(max(slip, 0.0))
+        if not (K or T_miss):
+            return 0.0, 0.0
+        a, at, p, pt = (float(x) for x in steps)
+        return c_m * (K * a + T_miss * p), c_m * (K * (t * a - at) + T_miss * (t * p - pt)) / J_min
 
 
 def mode_plan(scene, T: Optional[float] = None, attitude: bool = True, quiet: bool = False,
