@@ -149,7 +149,7 @@ def test_error_control_decides_alike_whatever_the_breaks():
         drive(r)
         runs.append(r)
     a, b = (x.result() for x in runs)
-    divs = [h[3] for h in runs[0].control.history]
+    divs = [h[3] for h in runs[0].estimator.control.history]
     print(f"\nstep divisor at the checks: {', '.join(f'{d:.3g}' for d in divs)}; final {runs[0].sim.step_div:.3g}")
     assert len(set(divs)) > 1  # the control did change the step
     assert np.array_equal(a.L, b.L) and np.array_equal(a.q, b.q) and a.steps == b.steps

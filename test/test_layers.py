@@ -146,3 +146,14 @@ def test_the_engine_parts_are_modules_that_never_reach_up_into_the_simulator_or_
     # and the Simulator composes them
     composed = {f"gyro_sim.engine.{p}" for p in ("terms", "step_size", "steppers")}
     assert composed <= set(GRAPH["gyro_sim.engine.simulator"])
+
+
+def test_the_error_estimate_is_a_part_the_runner_calls_and_never_reaches_up_into_it():
+    """The shadow run and the error control (gyro_sim/engine/shadow.py) are handed the run's simulator and breaks:
+    the module imports neither the Runner nor what drives it, and the Runner composes it."""
+    name = "gyro_sim.engine.shadow"
+    assert name in GRAPH, f"{name}: no such module"
+    up = sorted(set(GRAPH[name]) & {"gyro_sim.engine.runner", "gyro_sim.engine.simulate", "gyro_sim.engine.ticks",
+                                    "gyro_sim.engine.fidelity"})
+    assert not up, f"{name} imports {up}"
+    assert name in GRAPH["gyro_sim.engine.runner"]

@@ -1,5 +1,6 @@
-"""The :class:`Runner`: a :class:`~gyro_sim.engine.simulator.Simulator` advanced break by break (outputs, commands,
-controller ticks, switching events) with its error control, collecting the samples of a run.
+"""The :class:`Runner`: the run loop. A :class:`~gyro_sim.engine.simulator.Simulator` advanced break by break
+(outputs, commands, controller ticks, switching events), collecting the samples of a run; its error estimate (the
+shadow run and the error control) is the :class:`~gyro_sim.engine.shadow.ErrorEstimator` it calls at each break.
 """
 from __future__ import annotations
 
@@ -11,20 +12,15 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
-from gyro_sim.engine.model import AVERAGED_ERROR, body_rates, controller_period
+from gyro_sim.engine.model import body_rates, controller_period
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.saving import output_times, run_result, sample_arrays
+from gyro_sim.engine.shadow import ErrorEstimator
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
-from gyro_sim.physics.frames import symmetry_axis
-from gyro_sim.scenes.accuracy import (FINER, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
-                                      ErrorEstimate, is_legacy)
+from gyro_sim.scenes.accuracy import ErrorEstimate, is_legacy
 from gyro_sim.scenes.limits import L_limit
 from gyro_sim.scenes.scene import Scene, SceneError
-from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
-
-#: unit round-off of a double (the phases' floor: ErrorEstimate.round_off)
-ROUND_OFF = 2.0 ** -52
 
 
 class Runner:
@@ -42,7 +38,8 @@ class Runner:
     ``accuracy`` over ``horizon`` s (default: the duration). With ``estimate`` (default) a shadow simulator runs
     alongside (same commands, same stops, longer steps) and the error control (:class:`gyro_sim.accuracy.
     ErrorControl`) compares the two at its check instants, which are breaks of every run (so the ROS node and
-    an in-process run decide alike), estimates the error and corrects the step; :meth:`error_estimate` gives the
+    an in-process run decide alike), estimates the error and corrects the step: all of it the :attr:`estimator`
+    (:class:`gyro_sim.engine.shadow.ErrorEstimator`), which the loop calls; :meth:`error_estimate` gives the
     run's estimate. ``estimate=False`` (a run that locates switching events: its bisection re-integrates stretches
     the shadow cannot follow) runs the plan alone and estimates by the plan's model.
 
@@ -72,27 +69,10 @@ class Runner:
             check_budget(self.sim, T, self.period)
         if not is_legacy():
             self.sim.step_size.warn_plan(self.sim.state())
-        # the error control and its shadow run (gyro_sim/scenes/accuracy.py); checks at fixed fractions of the horizon
-        plan = self.sim.step_size.step_plan
+        # the error control and its shadow run (gyro_sim/engine/shadow.py); checks at fixed fractions of the horizon
         if estimate is None:  # (a law sampled at its switching events: no shadow; nor the old defaults' runs)
             estimate = (scene.controller is None or scene.controller.sampling != "events") and not is_legacy()
-        self.control = ErrorControl(plan, self.sim.attitude, H, adapt=not plan.explicit and estimate,
-                                    J_min=float(np.min(self.sim.terms.J)), L_bound=self.sim.step_size.L_bound,
-                                    axis=symmetry_axis(self.sim.terms.J), accuracy=scene.accuracy)
-        self.shadow = None
-        if estimate:
-            self.shadow = self.sim.follower()
-        self._checks = self.control.checks[self.control.checks < T] if estimate else np.zeros(0)
-        self._ck = 0  # the next check
-        self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
-        self._steps_seen = 0
-        self._impulse = 0.0  # ∫|N| dt over the output samples (N·m·s): the modes' error of L
-        self._L_seen = self.sim.y[0:3].copy()  # L at the last output sample (N·m·s)
-        self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
-        self._turned = 0.0  # ∫ |Ω| dt over the output samples (rad, |Ω| ≤ |L|/J_min): the phase the rotor turns
-        self._last_t = 0.0
-        self._om0 = float(np.linalg.norm(self.sim.y[0:3])) * float(np.max(self.sim.terms.Jinv))
-        self.averaged_eps: list = []  # the averaged models' ε of each stretch (fidelity.py)
+        self.estimator = ErrorEstimator(self.sim, scene, T, H, estimate)
         # ticks: the controller's (its period, else one per output sample); control_period sets them for any
         # scene (the ROS node: external commands are taken at ticks, also where the scene has no controller)
         # every controller tick is an output sample too: the controller (node) sees the published state
@@ -106,22 +86,12 @@ class Runner:
         if self.sim.terms.eff[effects.ON] != 0.0:
             sample_breaks = True
         # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
-        # the breaks of every run, samples or not: where the shadow follows (Runner._follow)
+        # the breaks of every run, samples or not: where the shadow follows (ErrorEstimator.follow)
         self._common = np.unique(np.concatenate([np.array([c.time for c in self._cmds], dtype=float), ticks,
                                                  np.array([T], dtype=float), np.array(sorted(knots), dtype=float),
-                                                 self._checks]))
+                                                 self.estimator._checks]))
         self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0), self._common]))
-        # the shadow stops only where the dynamics change (a command that changes a stator: apply_commands) and at
-        # the checks and the end: between, its steps are SHADOW_RATIO times the run's, whatever the ticks and
-        # samples that stop the run (a controller that re-sends the same command every tick leaves the shadow
-        # free to step over its ticks: their Richardson difference then measures a run whose steps are as long
-        # as the ticks). With an effect on (its rates change in time, the plan is made afresh at every break) the
-        # shadow follows through every break of every run, as the run does.
-        self._lazy = self.sim.terms.eff[effects.ON] == 0.0
-        if self.shadow is not None:
-            stops = np.unique(np.concatenate([t_out, self.breaks, [0.0]]))
-            # (its step at most SHADOW_RATIO times the run's longest: the run's steps end at its stops)
-            self.shadow.lead_gap = float(np.max(np.diff(stops))) if stops.size > 1 else math.inf
+        self.estimator.set_breaks(t_out, self.breaks, self._common)
         # output rows held in memory: all of them, or a buffer of ``buffer_rows`` that release() empties (a
         # streamed run: its rows go to a bag as they come, memory stays flat however long the run)
         if buffer_rows is not None and buffer_rows < 2:
@@ -217,10 +187,7 @@ class Runner:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.terms.stator_names}")
         by_index = {self.sim.terms.stator_names.index(n): c for n, c in commands.items()}
         self.sim.set_stators(by_index)
-        if self.shadow is not None:
-            if self._lazy and _changes(self.shadow, by_index):
-                self.sync_shadow(change=True)  # (the shadow reaches the change before it takes it)
-            self.shadow.set_stators(by_index)
+        self.estimator.set_stators(by_index)
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
@@ -246,8 +213,8 @@ class Runner:
         with CompileClock() as clock:
             self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
             self._accumulate(sel, rows)
-            if self.shadow is not None and self.failure is None:
-                self._follow(tb, sel)
+            if self.estimator.shadow is not None and self.failure is None:
+                self.estimator.follow(tb, sel)
         self.wall_time += clock.wall
         self.compile_time += clock.compile
         self.cur[rows] = c0
@@ -258,83 +225,7 @@ class Runner:
         self.apply_scene_commands()
         return out
 
-    # --- accuracy: the shadow run, the checks, the estimate ----------------------------------------
-    def _follow(self, tb: float, sel: np.ndarray) -> None:
-        """At a check instant and at the end: advance the shadow to ``tb`` (:meth:`sync_shadow`), compare and maybe
-        change the step. With an effect on, the shadow follows through every break of every run (not an output
-        sample made a break: the ROS node's samples are breaks, an in-process run's are not, and the shadow must
-        take the same steps in both)."""
-        sim, sh = self.sim, self.shadow
-        assert sh is not None
-        at_check = self._ck < self._checks.size and tb == self._checks[self._ck]
-        if self._lazy:
-            if not (at_check or tb >= self.T):
-                return
-        elif _holds(self.breaks, tb) and not _holds(self._common, tb):  # (an output sample made a break)
-            return
-        self.sync_shadow(tb)
-        seg = sim._seg
-        assert seg is not None
-        method = seg[1][5]
-        if at_check:
-            self._ck += 1
-            # |N| now and its mean since the previous check; whether the shadow's steps were longer there
-            # (from the states at the checks alone: the same in every run, whatever its samples)
-            n_now = _norm(sim.torque()) if not seg[1][4] else 0.0
-            L0, t0, st0, sst0 = self._at_check
-            n_mean = _norm(sim.y[0:3] - L0) / (tb - t0) if tb > t0 else n_now
-            meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
-            self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
-            f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, turned=self._turned)
-            if f is not None:
-                sim.step_div *= f
-            if f is not None or method in RATE_KNOB:  # (their step is J Ω / N of the state now: re-planned here)
-                sim.replan()
-                sh.replan()
-
-    def sync_shadow(self, t: Optional[float] = None, change: bool = False) -> None:
-        """Advance the shadow to ``t`` (default: the run's time) and count the stretch's steps, run's and
-        shadow's, for the error control (its Richardson denominator). The shadow's stops are where this is called:
-        at the checks and the end, where a command changes a stator (``change``) and before an averaged stretch."""
-        sim, sh = self.sim, self.shadow
-        t = sim.t if t is None else t
-        if sh is None or not sh.t < t or sim._seg is None:
-            return
-        s0 = sh.steps
-        # where a command change cuts the shadow's steps as the run's (its stretch no longer than R_MEASURABLE of the
-        # run's steps: commands closer than the step, e.g. every 0.5 ms), their difference would say nothing: the
-        # shadow follows the stretch with steps FINER times shorter than the run's there (the run's longest step is at
-        # least the stretch over its steps), and the difference is the run's error (ErrorControl.denom). (Not where a
-        # check cuts it: the early checks, T/4096 on, cut the run's first steps short, whose error is small beside
-        # that of whole steps; a run whose steps are all cut so is cut by its commands.)
-        k, span = sim.steps - self._steps_seen, t - sh.t
-        h = sh._segment()[6]
-        finer = 0.0  # (> 0: the shadow follows finer; the run's steps there over its plan's, what they weigh)
-        if change and math.isfinite(h) and h > 0 and 0 < k < R_MEASURABLE * math.ceil(span / h):
-            h_run = sim._seg[1][6]
-            finer = min(span / k / h_run, 1.0) if math.isfinite(h_run) and h_run > 0 else 1.0
-            gap, sh.lead_gap = sh.lead_gap, span / (k * FINER * SHADOW_RATIO[sh._segment()[5]])
-            sh.replan()
-        try:
-            sh.advance(t)
-        finally:
-            if finer > 0:
-                sh.lead_gap = gap
-                sh.replan()
-        self.count_stretch(sh.steps - s0, finer)
-
-    def count_stretch(self, shadow_steps: int, finer: float = 0.0) -> None:
-        """Count the stretch the shadow has just followed (``shadow_steps`` of its steps, the run's since the last
-        count; ``finer`` > 0: its steps FINER times shorter than the run's, the run's steps that fraction of its
-        plan's, ErrorControl.note_method) for the error control's Richardson
-        denominator, under the run's present segment's stepper."""
-        sim = self.sim
-        assert sim._seg is not None  # (it has advanced)
-        _, _, _, _, free, method, h = sim._seg[1]
-        self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
-                                 exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min, finer=finer)
-        self._steps_seen = sim.steps
-
+    # --- the samples: checked, then summed by the error estimate --------------------------------
     def _check_samples(self, sel: np.ndarray, r: slice) -> tuple[int, np.ndarray]:
         """How many of the new output samples (times ``sel``, buffer rows ``r``) hold a sound state: finite (L, the
         attitude where it is integrated, the eddy modes and effects' states, the torque) with |L| within
@@ -368,109 +259,19 @@ class Runner:
         return i, Ln[:i]
 
     def _accumulate(self, sel: np.ndarray, rows: slice) -> None:
-        """∫|N| dt and ∫ | |Ω| − |Ω0| | dt over the new output samples (the modes' error bound, error_estimate),
-        after checking them (:meth:`_check_samples`: a broken state ends the run)."""
+        """Check the new output samples (times ``sel``, buffer rows ``rows``; :meth:`_check_samples`: a broken state
+        ends the run) and hand the sound ones to the error estimate (:meth:`ErrorEstimator.accumulate`)."""
         if not sel.size:
             return
         n, Ln = self._check_samples(sel, slice(rows.start, rows.start + sel.size))
         if not n:
             return
-        # (sequential sums in time order, sample by sample: the same bits whether samples are breaks or not; scalar
-        # code, a few samples a call)
-        ts, Ls = sel[:n].tolist(), Ln.tolist()
-        self.control.note_L(max(Ls))
-        jmax = self.sim.terms.Jinv_max
-        prev, turned = self._last_t, self._turned
-        if self.sim.mode_plan.kind in (None, "thin_shell"):  # no truncation error to weigh (ModePlan.error_at: 0)
-            for t, L in zip(ts, Ls, strict=True):
-                turned += L * jmax * (t - prev)
-                prev = t
-        else:
-            r = slice(rows.start, rows.start + n)
-            N = np.linalg.norm(self.out_N[r], axis=1).tolist()
-            # (over a sample interval ∫|N| dt ≥ |ΔL|: a torque that peaks between the samples, a field's switch-on,
-            # counts)
-            dL = np.linalg.norm(np.diff(np.vstack([self._L_seen, self.out_y[r, 0:3]]), axis=0), axis=1).tolist()
-            self._L_seen = self.out_y[r.stop - 1, 0:3].copy()
-            imp, dev, om0 = self._impulse, self._spin_dev, self._om0
-            for t, L, Nk, dLk in zip(ts, Ls, N, dL, strict=True):
-                dt, om = t - prev, L * jmax
-                turned += om * dt
-                imp += max(Nk * dt, dLk)
-                dev += abs(om - om0) * dt
-                prev = t
-            self._impulse, self._spin_dev = imp, dev
-        self._turned, self._last_t = turned, prev
-
-    def resync_shadow(self) -> None:
-        """The run's state was set from outside (a fidelity hand-over): keep the errors so far and start the
-        shadow afresh from the run's state."""
-        if self.shadow is None:
-            return
-        sim, sh = self.sim, self.shadow
-        self.control.measure(sim, sh)
-        self.control.bank()
-        sh.y[:] = sim.y
-        sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
-        sh._nu_max = sim._nu_max
-        sh.replan()
+        self.estimator.accumulate(sel[:n], Ln, self.out_N[rows.start:rows.start + n],
+                                  self.out_y[rows.start:rows.start + n, 0:3])
 
     def error_estimate(self) -> ErrorEstimate:
-        """The run's estimated error so far (over the whole duration once it is done): the steps' (from the shadow,
-        else the plan's model), the eddy modes' truncation at the largest slip met, the averaged models' O(ε)."""
-        sim, acc = self.sim, self.scene.accuracy
-        ctl = self.control
-        L_max = max(ctl.L_max, _norm(sim.y[0:3]), 1e-300)
-        if self.shadow is not None:
-            if self.shadow.t == sim.t:
-                ctl.measure(sim, self.shadow)
-            # (else a run stopped between the shadow's stops: its errors as of the last; not caught up, which may
-            # take as long as the run took since, e.g. after a signal)
-            sL, sq, sp = ctl.estimate()
-            how = "richardson"
-            # steppers whose stretches the shadow could not measure (its steps no longer than the run's: stops
-            # closer than the step): the plan's model at the knob they ran
-            for m, k in ctl.weights.items():
-                if not k or k >= R_MEASURABLE * ctl.shadow_steps.get(m, 0):
-                    continue  # (measured)
-                m = "etdrk4" if m == STIFF else m
-                knob = (sim.step_plan.knob(m) / sim.step_div if m in RATE_KNOB
-                        else sim.step_plan.knob(m) * sim.step_div)
-                pL, pq = sim.step_plan.predicted(m, knob)
-                sL, sq, sp, how = sL + pL, sq + pq, sp + pq, "richardson+model"
-        else:
-            used = sorted(sim.step_size.methods_used or {"free"})
-            pred = [sim.step_plan.predicted(m) for m in used if m != "free" or sim.terms.free_axis == -1]
-            sL = max([p[0] for p in pred] + [0.0])
-            sq = sp = max([p[1] for p in pred] + [0.0])
-            how = "model"
-        e_g, e_im = sim.mode_plan.error_at(max(sim.slip_met, 0.0))
-        mL = max(e_g, e_im) * self._impulse / L_max
-        mq = e_im * self._spin_dev  # (a torque error turns the spin and precession rates: phases, directions)
-        kL, kq = sim.mode_plan.step_error(sim.slip_met, sim.field_steps, sim.t, sim.terms.c_m, float(np.min(sim.J)))
-        # (the field steps' transients in the modes left out: an impulse, which tilts L and turns the spin rate)
-        mL, mp, mq = mL + kL / L_max, mq + kq, mq + kL / L_max
-        aL = 0.0
-        if self.averaged_eps:  # (only a hybrid run has averaged stretches: gyro_sim.fidelity imports SciPy's solvers)
-            aL = AVERAGED_ERROR * max(self.averaged_eps)
-        # (relative to the true largest |L|, which may be the run's less its error: e / (1 − e) of it)
-        k = 1.0 / (1.0 - (sL + mL + aL)) if sL + mL + aL < 0.5 else 1.0
-        sL, mL, aL = k * sL, k * mL, k * aL
-        att = sim.attitude and not self.averaged_eps
-        # round-off: each step's phase update errs by ~u of the angle and of the unit quaternion, and the
-        # conserved |L| and energy random-walk by u √n of themselves, which turns the phases' rates
-        n = max(sim.steps, 1)
-        ro = ROUND_OFF * (self._turned * (1.0 + math.sqrt(n)) + n) if att else 0.0
-        sym = has_symmetry_axis(sim.J)
-        phase_tol = phase_tolerance(acc, 1.0, self._turned) if sym else math.nan
-        return ErrorEstimate(L=sL + mL + aL, attitude=(sq + mq + ro) if att else math.nan, steps_L=sL,
-                             steps_attitude=sq if att else math.nan, modes_L=mL, modes_attitude=mq if att else math.nan,
-                             averaged_L=aL, steps_method=how, rtol=acc.rtol,
-                             atol=math.nan if acc.attitude is None else acc.attitude,
-                             phase=(sp + mp + ro) if att and sym else math.nan,
-                             steps_phase=sp if att and sym else math.nan,
-                             modes_phase=mp if att and sym else math.nan,
-                             phase_tol=phase_tol if att else math.nan, round_off=ro)
+        """The run's estimated error so far (:meth:`ErrorEstimator.error_estimate`)."""
+        return self.estimator.error_estimate()
 
     # --- exact switching instants ------------------------------------------------------------
     def _snapshot(self) -> tuple:
@@ -543,19 +344,3 @@ class Runner:
                           None if self.failure is not None else self.error_estimate(), self.failure)
 
 
-def _norm(v: np.ndarray) -> float:
-    """|v| of a 3-vector as np.linalg.norm takes it (the square root of its dot product: the same bits), without
-    its overhead."""
-    return math.sqrt(float(v.dot(v)))
-
-
-def _holds(times: np.ndarray, t: float) -> bool:
-    """Whether sorted ``times`` hold ``t``."""
-    i = int(np.searchsorted(times, t))
-    return i < times.size and times[i] == t
-
-
-def _changes(sim: Simulator, commands: dict) -> bool:
-    """Whether ``{stator index: (current A | None, rate rad/s | None)}`` changes what a stator of ``sim`` does."""
-    return any(c is not None and c != sim.current[k] or r is not None and r != sim.rate[k]
-               for k, (c, r) in commands.items())

@@ -110,10 +110,10 @@ class Simulator:
             self._warn_plan()
 
     def follower(self) -> "Simulator":
-        """A shadow run of this one (the error control's: :class:`gyro_sim.engine.runner.Runner`): the same scene,
-        model and plan, its own state (a copy of this one's now) and its own step notes, following this simulator
-        (``leader``), quiet. Built from this simulator's parts instead of from the scene (no second validation,
-        mode plan, model or step plan: the same numbers, ~0.1 ms instead of ~0.5 ms)."""
+        """A shadow run of this one (the error control's: :class:`gyro_sim.engine.shadow.ErrorEstimator`): the same
+        scene, model and plan, its own state (a copy of this one's now) and its own step notes, following this
+        simulator (``leader``), quiet. Built from this simulator's parts instead of from the scene (no second
+        validation, mode plan, model or step plan: the same numbers, ~0.1 ms instead of ~0.5 ms)."""
         sh = object.__new__(Simulator)
         sh.__dict__.update(self.__dict__)
         sh.quiet, sh.step_div, sh.leader, sh.lead_gap = True, 1.0, self, math.inf

@@ -229,7 +229,7 @@ class TickLoop:
         bk = r.breaks
         fly = r.scene.effects.flywheel
         knots = [t for t in fly.profile.time if 0 < t < r.T] if fly is not None else []
-        special = np.concatenate([np.array([c.time for c in r._cmds], dtype=float), r._checks,
+        special = np.concatenate([np.array([c.time for c in r._cmds], dtype=float), r.estimator._checks,
                                   np.array(knots, dtype=float), np.array([r.T])])
         plain = ~np.isin(bk, special)
         # the first break at or after each that is not plain (len(bk) where none is)
@@ -274,7 +274,8 @@ class TickLoop:
                 r.sim._tune_call(time.perf_counter() - w0, r.sim.call_steps)
             nb = r._bi - i0
             common = bk[:nb][self._common[i0:i0 + nb]]
-            if r.shadow is not None and common.size and not r._lazy and r.failure is None:
+            es = r.estimator
+            if es.shadow is not None and common.size and not es._lazy and r.failure is None:
                 self._follow(common)
         r.wall_time += clock.wall
         r.compile_time += clock.compile
@@ -330,9 +331,10 @@ class TickLoop:
         return bk, law_at, rows, n_log, log_c, log_r
 
     def _follow(self, common: np.ndarray) -> None:
-        """The shadow run follows through the common breaks ``common`` (Runner._follow, none a check) in one call;
-        its steps and the run's count for the error control."""
-        self.r.count_stretch(self._follow_one(self.r.shadow, common))  # (under the run's segment of this chunk)
+        """The shadow run follows through the common breaks ``common`` (ErrorEstimator.follow, none a check) in one
+        call; its steps and the run's count for the error control."""
+        es = self.r.estimator
+        es.count_stretch(self._follow_one(es.shadow, common))  # (under the run's segment of this chunk)
 
     @staticmethod
     def _follow_one(sh, common: np.ndarray) -> int:

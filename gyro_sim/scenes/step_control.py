@@ -241,7 +241,7 @@ CHECKS = tuple(2.0 ** -k for k in range(12, 4, -1)) + tuple(k / 16 for k in rang
 R_MEASURABLE = 1.3
 #: where stops closer than the run's step cut the shadow's steps as they cut the run's (commands every 0.5 ms), the
 #: shadow follows that stretch with steps this many times shorter than the run's instead (step doubling, the run the
-#: coarser: the difference is the run's error less 1/FINER^p of it; Runner.sync_shadow)
+#: coarser: the difference is the run's error less 1/FINER^p of it; ErrorEstimator.sync_shadow)
 FINER = 2.0
 #: the step share of the tolerance a run aims its projected error at (a margin for the estimate's own error)
 AIM = 0.5
@@ -412,7 +412,7 @@ class ErrorControl:
                     stiff: bool = False, finer: float = 0.0) -> None:
         """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
         with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`); ``finer``: a stretch the shadow
-        followed with steps at most 1/:data:`FINER` of the run's (:meth:`Runner.sync_shadow`), its value the error
+        followed with steps at most 1/:data:`FINER` of the run's (:meth:`ErrorEstimator.sync_shadow`), its value the error
         the run's steps there make against steps of the run's plan, (h / h_plan)^p ≤ 1: a stretch cut short (an early
         check, T/4096) weighs little beside the stretches of whole steps."""
         # the estimate's r is of the steps' lengths, not of their counts: where the run's own stops (samples, ticks)
