@@ -18,6 +18,7 @@ import array
 import math
 import sys
 import threading
+from typing import Optional
 
 import numpy as np
 import rclpy
@@ -235,6 +236,8 @@ class ControllerNode(Node):
                                                   lambda m: self._on(state_numbers(m, "L"), "L"),
                                                   qos_profile(TOPIC_KINETIC_MOMENT))
         self.answered = 0  # commands published (a done: line before the first is an earlier run's: ignored)
+        self.half = False  # the last state message taken waits for the other of its stamp
+        self.last_kind: Optional[str] = None  # the kind whose message completed the last pair
         self.finished = False  # the simulator's run is done (and keep_alive is false): the loop ends
         self.status_sub = self.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
                                                    self._on_status, qos_profile(TOPIC_STATUS))
@@ -315,12 +318,14 @@ class ControllerNode(Node):
         key = numbers[0] * 1_000_000_000 + numbers[1]
         entry = self.pending.setdefault(key, {})
         entry[kind] = numbers
-        if len(entry) < 2:
+        self.half = len(entry) < 2
+        if self.half:
             if len(self.pending) > 1000:  # never grow without bound on a lost message
                 for k in sorted(self.pending)[:500]:
                     del self.pending[k]
             return
         del self.pending[key]
+        self.last_kind = kind
         imu, Lm = entry["imu"], entry["L"]
         x = ControlInput(t=key * 1e-9, L=np.array(Lm[2:5]), q=np.array([imu[5], imu[2], imu[3], imu[4]]),
                          omega_b=np.array(imu[6:9]), stator_names=self.names, stator_axes=self.axes)
@@ -406,12 +411,11 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
     executor.add_node(node)
     kinds = list(node.subs)
     waiter = MessageWait(node, [node.subs[k] for k in kinds], period=PUMP_PERIOD)
-    ready = [True] * len(kinds)  # (at the start: look at every subscription)
     next_pump = 0.0
     try:
         while not stop.is_set() and rclpy.ok() and not node.finished:
-            for kind, r in zip(kinds, ready, strict=True):
-                while r:  # every message that came (the wait says which subscriptions have one)
+            for kind in kinds:
+                while True:  # every message that came
                     msg = node.take(kind)
                     if msg is None:
                         break
@@ -420,7 +424,10 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
             if now >= next_pump:
                 executor.spin_once(timeout_sec=0.0)
                 next_pump = time.perf_counter() + PUMP_PERIOD
-            ready = waiter.wait()  # (woken at least every PUMP_PERIOD)
+            # woken once a state: by the kind that completed the last one (the simulator publishes a state's two
+            # messages back to back: the first is there when the last comes), by either while half of one is in
+            # (woken at least every PUMP_PERIOD)
+            waiter.wait(None if node.half or node.last_kind is None else [kinds.index(node.last_kind)])
     finally:
         waiter.close()
         executor.shutdown()

@@ -74,16 +74,24 @@ class MessageWait:
             except Exception:  # noqa: BLE001 - the context is being shut down: no one waits any more
                 return
 
-    def wait(self) -> list:
-        """Wait until a subscription has a message, or at most about ``period`` s; which subscriptions have one
-        (one bool each, in the order of ``subs``). A signal is seen when it returns."""
+    def wait(self, only: Optional[list] = None) -> list:
+        """Wait until a subscription has a message (of those whose indices ``only`` gives, default all), or at most
+        about ``period`` s; which subscriptions have one (one bool each, in the order of ``subs``; False for those
+        not waited on). A signal is seen when it returns."""
         ws = self._ws
         ws.clear_entities()
-        for s in self.subs:
+        subs = self.subs if only is None else [self.subs[i] for i in only]
+        for s in subs:
             ws.add_subscription(s.handle)
         ws.add_guard_condition(self._guard)
         ws.wait(-1)
-        return [ws.is_ready("subscription", i) for i in range(len(self.subs))]
+        ready = [ws.is_ready("subscription", i) for i in range(len(subs))]
+        if only is None:
+            return ready
+        out = [False] * len(self.subs)
+        for i, r in zip(only, ready, strict=True):
+            out[i] = r
+        return out
 
     def close(self) -> None:
         """End the wake-up thread (waits that follow rely on messages alone)."""
