@@ -140,8 +140,9 @@ def parse_command(msg, stators: list, limits: Optional[tuple] = None) -> tuple[O
 
 
 def _is_real(x) -> bool:
-    """A real number, not a boolean (numpy's bool_ is no numbers.Real; Python's bool is)."""
-    return isinstance(x, numbers.Real) and not isinstance(x, bool)
+    """A real number, not a boolean (numpy's bool_ is no numbers.Real; Python's bool is). (A float first: the
+    per-tick case, without the ABC's check.)"""
+    return type(x) is float or (isinstance(x, numbers.Real) and not isinstance(x, bool))
 
 
 def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
@@ -162,8 +163,8 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
     unknown = [name for name in names if name not in known]
     if unknown:
         return f"name = {preview(names)}: unknown stator {preview(unknown[0])}; allowed: {preview(stators)}"
-    twice = [name for name, k in Counter(names).items() if k > 1]
-    if twice:
+    if len(set(names)) != n:
+        twice = [name for name, k in Counter(names).items() if k > 1]
         return f"name = {preview(names)}: stator {preview(twice[0])} is named twice"
     if n_cur != n:
         return f"effort = {preview(list(msg.effort[:8]))}: one current (A) per name expected ({n} names, {n_cur} values)"
@@ -178,13 +179,14 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
             return f"velocity[{name}] = {preview(r)}: field rate must be finite (rad/s)"
     if limits is not None:
         index = {n: k for k, n in enumerate(stators)}
+        max_current, max_rate = ([float(v) for v in x] for x in limits)
         for name, c in zip(names, msg.effort, strict=True):
-            lim = float(limits[0][index[name]])
+            lim = max_current[index[name]]
             if c > lim:
                 return (f"effort[{name}] = {float(c):.6g}: beyond {lim:.6g} A, the largest current of stator "
                         f"{name!r} (its max_current in the scene)")
         for name, r in zip(names, msg.velocity if n_rate else [0.0] * n, strict=True):  # (empty: unchanged)
-            lim = float(limits[1][index[name]])
+            lim = max_rate[index[name]]
             if abs(r) > lim:
                 return (f"velocity[{name}] = {float(r):.6g}: beyond {lim:.6g} rad/s, the largest field rate of stator "
                         f"{name!r} (its max_rate in the scene)")

@@ -781,6 +781,7 @@ class Loop:
                 self.publish_samples(rows)
                 r.release()
                 self.diagnostics()
+                self.pump()  # services and parameters every PUMP_PERIOD, also where no tick waits for a command
                 if p["progress"]:
                     self.show_progress()
                 if self.mode == "realtime":
