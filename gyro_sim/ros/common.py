@@ -94,8 +94,11 @@ class MessageWait:
         return out
 
     def close(self) -> None:
-        """End the wake-up thread (waits that follow rely on messages alone)."""
+        """End the wake-up thread and let go of the rcl wait set and guard condition (before the node is destroyed:
+        the wait set points at its subscriptions); no wait follows."""
         self._closed.set()
+        self._ticker.join(timeout=1.0)
+        self._ws = self._guard = None
 
 
 def make_executor():
