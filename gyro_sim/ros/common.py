@@ -301,6 +301,11 @@ def bound_teardown(who: str, status: Optional[int], budget: Optional[float] = No
     timer = threading.Timer(budget, _exit)
     timer.daemon = True
     timer.start()
+    # and a watchdog that needs no GIL (a teardown seen spinning in rclpy's Node.destroy_node with the GIL held, so
+    # the timer above never ran): 5 s later, the threads' tracebacks on stderr and exit status 1
+    import faulthandler
+
+    faulthandler.dump_traceback_later(budget + 5.0, exit=True)
     return timer
 
 
