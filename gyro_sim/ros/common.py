@@ -98,7 +98,7 @@ class MessageWait:
         the wait set points at its subscriptions); no wait follows."""
         self._closed.set()
         self._ticker.join(timeout=1.0)
-        self._ws = self._guard = None
+        del self._ws, self._guard
 
 
 def make_executor():
