@@ -18,6 +18,7 @@ import array
 import math
 import sys
 import threading
+from typing import Optional
 
 import numpy as np
 import rclpy
@@ -28,7 +29,8 @@ from pydantic import ValidationError
 
 from gyro_sim.io.messages import (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPICS,
                                   node_topic)
-from gyro_sim.ros.common import message_class, msg_time, node_main, qos_profile
+from gyro_sim.ros.common import message_class, node_main, qos_profile, take
+from gyro_sim.ros.wire import STAMP_PATHS, Template, Wire, state_templates, take_serialized
 from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.engine.simulate import stator_triad
 
@@ -226,14 +228,28 @@ class ControllerNode(Node):
         self.pub = self.create_publisher(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                          qos_profile(TOPIC_STATOR_COMMANDS))
         self.subs = {}
-        self.subs["imu"] = self.create_subscription(message_class(TOPICS[TOPIC_IMU]), node_topic(TOPIC_IMU), lambda m: self._on(m, "imu"),
-                                 qos_profile(TOPIC_IMU))
-        self.subs["L"] = self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]), node_topic(TOPIC_KINETIC_MOMENT),
-                                 lambda m: self._on(m, "L"), qos_profile(TOPIC_KINETIC_MOMENT))
+        self.subs["imu"] = self.create_subscription(message_class(TOPICS[TOPIC_IMU]), node_topic(TOPIC_IMU),
+                                                    lambda m: self._on(state_numbers(m, "imu"), "imu"),
+                                                    qos_profile(TOPIC_IMU))
+        self.subs["L"] = self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]),
+                                                  node_topic(TOPIC_KINETIC_MOMENT),
+                                                  lambda m: self._on(state_numbers(m, "L"), "L"),
+                                                  qos_profile(TOPIC_KINETIC_MOMENT))
         self.answered = 0  # commands published (a done: line before the first is an earlier run's: ignored)
+        self.half = False  # the last state message taken waits for the other of its stamp
+        self.last_kind: Optional[str] = None  # the kind whose message completed the last pair
         self.finished = False  # the simulator's run is done (and keep_alive is false): the loop ends
         self.status_sub = self.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
                                                    self._on_status, qos_profile(TOPIC_STATUS))
+        # states taken and commands published as CDR bytes where rosbags' and rclpy's serializations agree
+        # (gyro_sim.ros.wire: rclpy's Python message objects cost more than the law)
+        self.wire = Wire({TOPIC_IMU: self.subs["imu"].msg_type, TOPIC_KINETIC_MOMENT: self.subs["L"].msg_type,
+                          TOPIC_STATOR_COMMANDS: self._command_class})
+        self.serialized = {kind: self.wire.serialized(t) for kind, t in _TOPIC.items()}
+        self.wire.serialized(TOPIC_STATOR_COMMANDS)
+        # the simulator's state messages read at fixed places (gyro_sim.ros.wire.Template; others decoded whole)
+        self.templates = {k: v for k, v in ((k, state_templates(self.wire).get(t)) for k, t in _TOPIC.items()) if v}
+        self._command_templates: dict = {}  # (names, with rates) -> Template of the command
         self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}"
                                + _expected_time_constant(self.scene, cfg))
 
@@ -282,33 +298,75 @@ class ControllerNode(Node):
         if msg.data.startswith("done:") and self.answered and not self.get_parameter("keep_alive").value:
             self.finished = True
 
-    def _on(self, msg, kind: str) -> None:
-        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    def take(self, kind: str):
+        """The numbers (:func:`state_numbers`) of the next state message of subscription ``kind`` ('imu', 'L'), past
+        the executor, or None: read from its CDR bytes where :attr:`wire` allows (at the places of
+        :attr:`templates`, or decoded whole), else from rclpy's message."""
+        sub = self.subs[kind]
+        if not self.serialized[kind]:
+            msg = take(sub)
+            return None if msg is None else state_numbers(msg, kind)
+        raw = take_serialized(sub)
+        if raw is None:
+            return None
+        tmpl = self.templates.get(kind)
+        numbers = tmpl.decode(raw) if tmpl is not None else None
+        return numbers if numbers is not None else state_numbers(self.wire.decode(_TOPIC[kind], raw), kind)
+
+    def _on(self, numbers: list, kind: str) -> None:
+        """One state message's numbers (:func:`state_numbers`); with both of a stamp, the law's command for it."""
+        key = numbers[0] * 1_000_000_000 + numbers[1]
         entry = self.pending.setdefault(key, {})
-        entry[kind] = msg
-        if len(entry) < 2:
+        entry[kind] = numbers
+        self.half = len(entry) < 2
+        if self.half:
             if len(self.pending) > 1000:  # never grow without bound on a lost message
                 for k in sorted(self.pending)[:500]:
                     del self.pending[k]
             return
         del self.pending[key]
+        self.last_kind = kind
         imu, Lm = entry["imu"], entry["L"]
-        o, w = imu.orientation, imu.angular_velocity
-        x = ControlInput(t=msg_time(imu.header), L=np.array([Lm.vector.x, Lm.vector.y, Lm.vector.z]),
-                         q=np.array([o.w, o.x, o.y, o.z]), omega_b=np.array([w.x, w.y, w.z]),
-                         stator_names=self.names, stator_axes=self.axes)
+        x = ControlInput(t=key * 1e-9, L=np.array(Lm[2:5]), q=np.array([imu[5], imu[2], imu[3], imu[4]]),
+                         omega_b=np.array(imu[6:9]), stator_names=self.names, stator_axes=self.axes)
         cmds = self.law(x)
-        # the command (gyro_sim.io.messages.command_message's content, filled directly: this is the per-tick path)
-        out = self._command_class()
-        out.header.stamp = imu.header.stamp
+        # the command (gyro_sim.io.messages.command_message's content, with the state's own stamp)
         names = list(cmds)  # empty (law 'hold'): an empty command, which changes nothing
-        out.name = names
-        out.effort = [float(cmds[n][0]) for n in names]
         rates = [cmds[n][1] for n in names]
-        if any(r is not None for r in rates):
-            out.velocity = [float(r) for r in rates]
-        self.pub.publish(out)
+        effort = [float(cmds[n][0]) for n in names]
+        velocity = [float(r) for r in rates] if any(r is not None for r in rates) else []
+        self.pub.publish(self._command(int(imu[0]), int(imu[1]), names, effort, velocity))
         self.answered += 1
+
+    def _command(self, sec: int, nanosec: int, names: list, effort: list, velocity: list):
+        """The command to publish (CDR bytes where :attr:`wire` allows, by a template per set of names)."""
+        fields = {"header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ""}, "name": names,
+                  "position": [], "effort": effort, "velocity": velocity}
+        key = (tuple(names), bool(velocity))
+        tmpl = self._command_templates.get(key)
+        if tmpl is None and len(self._command_templates) < 16 and self.wire.serialized(TOPIC_STATOR_COMMANDS):
+            tmpl = self._command_templates[key] = Template(
+                TOPIC_STATOR_COMMANDS, fields, STAMP_PATHS + tuple(("effort", i) for i in range(len(names)))
+                + tuple(("velocity", i) for i in range(len(velocity))))
+        if tmpl is not None:
+            return tmpl.encode(sec, nanosec, *effort, *velocity)
+        return self.wire.encode(TOPIC_STATOR_COMMANDS, fields)
+
+
+#: the state subscriptions' kinds and topics
+_TOPIC = {"imu": TOPIC_IMU, "L": TOPIC_KINETIC_MOMENT}
+
+
+def state_numbers(msg, kind: str) -> list:
+    """The numbers the law reads from a state message (rclpy's or rosbags'), in the order of the simulator's
+    templates (:func:`gyro_sim.ros.wire.state_templates`): stamp sec, nanosec, then for 'imu' the orientation
+    x y z w and the angular velocity x y z, for 'L' the vector x y z."""
+    st = msg.header.stamp
+    if kind == "imu":
+        o, w = msg.orientation, msg.angular_velocity
+        return [st.sec, st.nanosec, o.x, o.y, o.z, o.w, w.x, w.y, w.z]
+    v = msg.vector
+    return [st.sec, st.nanosec, v.x, v.y, v.z]
 
 
 def _expected_time_constant(scene, cfg) -> str:
@@ -347,28 +405,31 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
     after the simulator's final ``done:`` status (unless ``keep_alive``)."""
     import time
 
-    from gyro_sim.ros.common import MessageWait, exit_status, make_executor, take
+    from gyro_sim.ros.common import MessageWait, exit_status, make_executor
 
     executor = make_executor()
     executor.add_node(node)
-    subs = list(node.subs.items())
-    waiter = MessageWait(node, [sub for _, sub in subs])
+    kinds = list(node.subs)
+    waiter = MessageWait(node, [node.subs[k] for k in kinds], period=PUMP_PERIOD)
     next_pump = 0.0
     try:
         while not stop.is_set() and rclpy.ok() and not node.finished:
-            got = False
-            for kind, sub in subs:
-                msg = take(sub)
-                if msg is not None:
+            for kind in kinds:
+                while True:  # every message that came
+                    msg = node.take(kind)
+                    if msg is None:
+                        break
                     node._on(msg, kind)
-                    got = True
             now = time.perf_counter()
             if now >= next_pump:
                 executor.spin_once(timeout_sec=0.0)
                 next_pump = time.perf_counter() + PUMP_PERIOD
-            elif not got:
-                waiter.wait(min(PUMP_PERIOD, next_pump - now))
+            # woken once a state: by the kind that completed the last one (the simulator publishes a state's two
+            # messages back to back: the first is there when the last comes), by either while half of one is in
+            # (woken at least every PUMP_PERIOD)
+            waiter.wait(None if node.half or node.last_kind is None else [kinds.index(node.last_kind)])
     finally:
+        waiter.close()
         executor.shutdown()
     if node.finished:
         node.get_logger().info("controller: the simulator's run is done; exiting (keep_alive:=true keeps it running)")

@@ -212,24 +212,28 @@ def clock_message(t: float) -> dict:
 
 def state_messages(t: float, L: Any, q_wxyz: Any, omega_b: Any, euler: Any, torque: Any,
                    names: Sequence[str], current: Any, rate: Any, phase: Any,
-                   imu_covariance: Optional[tuple] = None) -> dict[str, dict]:
+                   imu_covariance: Optional[tuple] = None, only: Optional[Any] = None) -> dict[str, dict]:
     """The messages of one output sample at simulation time ``t`` (s): topic → fields.
 
     L, torque: case frame (N·m·s, N·m); q_wxyz: attitude body → case as (w, x, y, z);
     omega_b: body frame (rad/s); euler: (ψ, θ, φ) rad; names/current/rate/phase: per stator
     (A, rad/s signed, rad). Topics in :data:`STATE_TOPICS` order (``/clock`` first). ``imu_covariance``:
     (orientation, angular velocity) covariances of /gyro/imu, row-major 3x3 (rad², (rad/s)²), where the state
-    carries injected noise (gyro_sim.faults); default zeros = unknown.
+    carries injected noise (gyro_sim.faults); default zeros = unknown. ``only``: the topics to build (default all;
+    a node builds those someone subscribes to, at each lockstep tick); the arguments of the others are not read.
     """
+    only = STATE_TOPICS if only is None else only
     time = _time(t)
     q = _floats(q_wxyz, "q_wxyz")
     if len(q) != 4:
         raise ValueError(f"q_wxyz: expected 4 components (w, x, y, z), got {len(q)}")
     w, x, y, z = q
     wx, wy, wz = _vec3(omega_b, "omega_b")
-    return {
-        TOPIC_CLOCK: {"clock": dict(time)},
-        TOPIC_IMU: {
+    out: dict[str, dict] = {}
+    if TOPIC_CLOCK in only:
+        out[TOPIC_CLOCK] = {"clock": dict(time)}
+    if TOPIC_IMU in only:
+        out[TOPIC_IMU] = {
             "header": _header(dict(time), FRAME_ROTOR),
             "orientation": {"x": x, "y": y, "z": z, "w": w},
             "orientation_covariance": list(imu_covariance[0]) if imu_covariance else list(_UNKNOWN_COV),
@@ -237,14 +241,19 @@ def state_messages(t: float, L: Any, q_wxyz: Any, omega_b: Any, euler: Any, torq
             "angular_velocity_covariance": list(imu_covariance[1]) if imu_covariance else list(_UNKNOWN_COV),
             "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
             "linear_acceleration_covariance": list(_NOT_PROVIDED_COV),
-        },
-        TOPIC_KINETIC_MOMENT: _vector3_stamped(dict(time), FRAME_CASE, L, "L"),
-        TOPIC_EULER: _vector3_stamped(dict(time), FRAME_L, euler, "euler"),
-        TOPIC_TORQUE: _vector3_stamped(dict(time), FRAME_CASE, torque, "torque"),
-        TOPIC_TF: {"transforms": [_transform(time, FRAME_ROTOR, (w, x, y, z)),
-                                  _transform(time, FRAME_L, _l_frame_quat(_vec3(L, "L")))]},
-        TOPIC_STATORS: _joint_state(dict(time), names, "stators", position=phase, velocity=rate, effort=current),
-    }
+        }
+    if TOPIC_KINETIC_MOMENT in only:
+        out[TOPIC_KINETIC_MOMENT] = _vector3_stamped(dict(time), FRAME_CASE, L, "L")
+    if TOPIC_EULER in only:
+        out[TOPIC_EULER] = _vector3_stamped(dict(time), FRAME_L, euler, "euler")
+    if TOPIC_TORQUE in only:
+        out[TOPIC_TORQUE] = _vector3_stamped(dict(time), FRAME_CASE, torque, "torque")
+    if TOPIC_TF in only:
+        out[TOPIC_TF] = {"transforms": [_transform(time, FRAME_ROTOR, (w, x, y, z)),
+                                        _transform(time, FRAME_L, _l_frame_quat(_vec3(L, "L")))]}
+    if TOPIC_STATORS in only:
+        out[TOPIC_STATORS] = _joint_state(dict(time), names, "stators", position=phase, velocity=rate, effort=current)
+    return out
 
 
 def _transform(time: dict, child: str, q_wxyz: Sequence[float]) -> dict:

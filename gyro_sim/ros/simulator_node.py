@@ -52,7 +52,7 @@ from rclpy.node import Node
 from gyro_sim.io.messages import (DIAG_ERROR, DIAG_OK, DIAG_WARN, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU,
                         TOPIC_KINETIC_MOMENT, TOPIC_SCENE, TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS,
                         TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS, diagnostics_message, effects_message,
-                        node_topic, scene_message, stamp_ns, state_messages, status_message, to_ros)
+                        node_topic, scene_message, stamp_ns, state_messages, status_message)
 from gyro_sim.compiled.compile_watch import announce_compiles, compile_seconds
 from gyro_sim.engine.faults import FaultConfig, Faults
 from gyro_sim.scenes.scene import SceneError, load_scene
@@ -61,6 +61,7 @@ from gyro_sim.engine.simulate import Runner, controller_period
 from gyro_sim.ros.common import (MessageWait, exit_status, make_executor, message_class, node_main, parse_command,
                                  qos_profile, signal_name, take, wait_for_matches)
 from gyro_sim.ros.launch import CONTROLLER_ENDED_SIGNAL
+from gyro_sim.ros.wire import Wire, command_view, state_templates, take_serialized
 
 MODES = ("lockstep", "realtime", "freerun")
 #: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
@@ -78,7 +79,6 @@ RUNTIME_PARAMS = ("rate_factor", "watchdog_timeout", "startup_timeout", "step_ti
 #: what lockstep does when its controller is lost (parameter on_controller_lost)
 LOST_POLICIES = ("stop", "wait", "currents_off")
 LIVENESS_PERIOD = 0.25  # wall s between looks at the controller's presence while lockstep waits for it
-WAIT_SLICE = 0.05  # wall s at most one blocking wait lasts (a signal is seen when it returns)
 #: exit status of a run that failed (its controller lost, policy stop): the bag's end says ``failed: ...``
 EXIT_FAILED = 1
 #: the node's parameters: (name, default, description, range, read-only); defaults None come from the scene
@@ -199,6 +199,12 @@ class SimulatorNode(Node):
         self._subs, self._subs_next = (), 0.0
         self.command_sub = self.create_subscription(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                  self._on_command, qos_profile(TOPIC_STATOR_COMMANDS))
+        # the per-tick messages as CDR bytes (gyro_sim.ros.wire), each type checked now (not in the first tick)
+        self.wire = Wire({**self.classes, TOPIC_STATOR_COMMANDS: self.command_sub.msg_type})
+        self.commands_serialized = self.wire.serialized(TOPIC_STATOR_COMMANDS)
+        for t in topics:
+            self.wire.serialized(t)
+        self.templates = state_templates(self.wire)  # (their numbers patched into bytes made once)
         self.control = RunControl(p["start_paused"])
         self.recording = bool(p["record"])
         from std_srvs.srv import Trigger
@@ -276,7 +282,15 @@ class SimulatorNode(Node):
         self.commands.append((msg, time.perf_counter()))
 
     def publish(self, topic: str, fields: dict) -> None:
-        self.pubs[topic].publish(to_ros(self.classes[topic], fields))
+        self.wire.publish(self.pubs[topic], topic, fields)
+
+    def take_command(self):
+        """The next command message of the subscription (past the executor), or None: decoded from its CDR bytes
+        where :attr:`wire` allows (:func:`gyro_sim.ros.wire.command_view`), else rclpy's message."""
+        if not self.commands_serialized:
+            return take(self.command_sub)
+        raw = take_serialized(self.command_sub)
+        return None if raw is None else command_view(self.wire.decode(TOPIC_STATOR_COMMANDS, raw))
 
     def publish_status(self, text: str, warn: bool = False) -> None:
         if warn:  # rclpy ties one severity to each call site
@@ -305,13 +319,19 @@ class SimulatorNode(Node):
                 if self.faults is not None and self.fault_config.sensors_active:
                     L, q, w = self.faults.state(L, q, w, ns)  # what a bench's sensors would read
                     cov = self.faults.covariances()
-                msgs = state_messages(s["t"][i], L, q, w, s["euler"][i], s["torque"][i], names, s["current"][i],
-                                      s["rate"][i], s["phase"][i], imu_covariance=cov)
+                eul = s["euler"]  # (None: not computed, no one subscribes to it)
+                msgs = state_messages(s["t"][i], L, q, w, None if eul is None else eul[i], s["torque"][i], names,
+                                      s["current"][i], s["rate"][i], s["phase"][i], imu_covariance=cov,
+                                      only=topics if eul is not None else [t for t in topics if t != TOPIC_EULER])
                 if s["effects"] and TOPIC_EFFECTS in topics:
                     msgs[TOPIC_EFFECTS] = effects_message(s["t"][i], {k: v[i] for k, v in s["effects"].items()})
-                for topic in topics:
-                    if msgs.get(topic) is not None:
-                        self.publish(topic, msgs[topic])
+                # encoded first (a template where the message has its shape: no sensor covariance injected), then
+                # sent back to back: a controller woken by the first finds the second there
+                tmpl = self.templates
+                out = [(self.pubs[t], tmpl[t].encode_fields(msgs[t]) if t in tmpl and (cov is None or t != TOPIC_IMU)
+                        else self.wire.encode(t, msgs[t])) for t in topics if msgs.get(t) is not None]
+                for pub, m in out:
+                    pub.publish(m)
             self.published_wall[ns] = now
             if topics:  # (published to no one: no answer to expect)
                 self.published_n[ns] = self.published_n.get(ns, 0) + 1
@@ -322,8 +342,9 @@ class SimulatorNode(Node):
 
 
 def last_sample(s: dict) -> dict:
-    """The last row of a samples dict (:meth:`Runner.samples`), as a one-row samples dict."""
-    return {k: ({n: a[-1:] for n, a in v.items()} if isinstance(v, dict) else v[-1:]) for k, v in s.items()}
+    """The last row of a samples dict (:meth:`Runner.samples`), as a one-row samples dict (None stays None)."""
+    return {k: ({n: a[-1:] for n, a in v.items()} if isinstance(v, dict) else None if v is None else v[-1:])
+            for k, v in s.items()}
 
 
 class Loop:
@@ -529,12 +550,12 @@ class Loop:
     def drain(self, pending: int, strict: bool) -> None:
         """Take the commands that came (at most :data:`MAX_COMMANDS_PER_TICK`: a flood cannot stall the run)."""
         self.pump()
-        q, sub = self.node.commands, self.node.command_sub
+        q = self.node.commands
         for _ in range(MAX_COMMANDS_PER_TICK):
             if q:
                 msg, wall = q.popleft()
             else:
-                msg, wall = take(sub), time.perf_counter()
+                msg, wall = self.node.take_command(), time.perf_counter()
                 if msg is None:
                     return
             self.take(msg, wall, pending, strict)
@@ -546,7 +567,7 @@ class Loop:
         subscription (:class:`MessageWait`: no busy poll). While waiting, the last state is published again every
         0.5 s, so a state lost before discovery completed does not stall the loop (the controller answers a repeat
         identically)."""
-        q, sub = self.node.commands, self.node.command_sub
+        q = self.node.commands
         now = time.perf_counter()
         start, resend, look = now, now + 0.5, now + LIVENESS_PERIOD
         self.waiting_since = now
@@ -556,7 +577,7 @@ class Loop:
                     msg, wall = q.popleft()
                     if self.take(msg, wall, stamp, True):
                         return None
-                msg = take(sub)
+                msg = self.node.take_command()
                 if msg is not None:
                     if self.take(msg, time.perf_counter(), stamp, True):
                         return None
@@ -573,7 +594,7 @@ class Loop:
                     if self.last_published:
                         self.node.publish_samples(self.last_published["s"], self.names)
                     resend = now + 0.5
-                self.waiter.wait(min(WAIT_SLICE, look - now, resend - now, max(self.next_pump - now, 0.0)))
+                self.waiter.wait()  # (woken at least every WAKE_PERIOD: signals, liveness, services)
             return None
         finally:
             self.waiting_since = None
@@ -705,7 +726,8 @@ class Loop:
     def publish_samples(self, rows: slice) -> None:
         if rows.stop <= rows.start:  # a break that is no sample (a command's instant, an error-control check)
             return
-        s = self.runner.samples(rows)
+        # (the Euler angles only where someone reads them: a third of the samples' cost)
+        s = self.runner.samples(rows, euler=self.recorder is not None or TOPIC_EULER in self.node.subscribed())
         self.node.publish_samples(s, self.names)
         if s["t"].size:
             self.last_published["s"] = last_sample(s)
@@ -759,6 +781,7 @@ class Loop:
                 self.publish_samples(rows)
                 r.release()
                 self.diagnostics()
+                self.pump()  # services and parameters every PUMP_PERIOD, also where no tick waits for a command
                 if p["progress"]:
                     self.show_progress()
                 if self.mode == "realtime":
@@ -862,6 +885,7 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
     end, 128 + n it was stopped by signal n (``stop``, see :func:`gyro_sim.ros.common.exit_status`)."""
     executor = make_executor()
     executor.add_node(node)
+    loop = None
     try:
         try:
             loop = Loop(node, stop, lambda timeout: executor.spin_once(timeout_sec=timeout))
@@ -871,6 +895,8 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
         with _controller_ended_signal(loop.controller_ended):
             return loop.run()
     finally:
+        if loop is not None:
+            loop.waiter.close()
         executor.shutdown()
 
 
