@@ -412,9 +412,9 @@ class ErrorControl:
                     stiff: bool = False, finer: float = 0.0) -> None:
         """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
         with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`); ``finer``: a stretch the shadow
-        followed with steps at most 1/:data:`FINER` of the run's (:meth:`ErrorEstimator.sync_shadow`), its value the error
-        the run's steps there make against steps of the run's plan, (h / h_plan)^p ≤ 1: a stretch cut short (an early
-        check, T/4096) weighs little beside the stretches of whole steps."""
+        followed with steps at most 1/:data:`FINER` of the run's (:meth:`ErrorEstimator.sync_shadow`), its value the
+        error the run's steps there make against steps of the run's plan, (h / h_plan)^p ≤ 1: a stretch cut short (an
+        early check, T/4096) weighs little beside the stretches of whole steps."""
         # the estimate's r is of the steps' lengths, not of their counts: where the run's own stops (samples, ticks)
         # cut its steps it takes more than SHADOW_RATIO times the shadow's, but its longest steps, which make its
         # error, are still only SHADOW_RATIO times shorter than the shadow's (magnetizable_body: counts 3.3, r^8 − 1
