@@ -19,8 +19,9 @@ WARM_DURATION = 0.05
 
 
 def warm(names: Optional[Iterable[str]] = None, say: Callable[[str], None] = print) -> float:
-    """Run each scene (default: every built-in one) for :data:`WARM_DURATION` s, as scenes run and as the ROS node
-    and recordings run them (with the attitude), so every kernel they use is compiled and cached. Returns the
+    """Run each scene (default: every built-in one) for :data:`WARM_DURATION` s, as scenes run in-process, as
+    `gyro-sim run` runs them (a caller taking each sample: its progress line) and as the ROS node and recordings run
+    them (with the attitude), so every kernel they use is compiled and cached. Returns the
     compile seconds spent (0 where the cache was warm)."""
     from gyro_sim.scenes.scene import builtin_scenes, load_scene
     from gyro_sim.engine.simulate import run
@@ -31,6 +32,7 @@ def warm(names: Optional[Iterable[str]] = None, say: Callable[[str], None] = pri
         scene = load_scene(name)
         d = min(scene.duration, WARM_DURATION)
         run(scene, duration=d)
+        run(scene, duration=d, on_samples=_ignore)  # (as `gyro-sim run` does: each sample a break, for its progress)
         if scene.fidelity != "full" or not scene.output.attitude:
             run(load_scene(name, overrides={"fidelity": "full"}), duration=d, attitude=True)
         currents_off(load_scene(name, overrides={"fidelity": "full"}), d)
@@ -38,6 +40,10 @@ def warm(names: Optional[Iterable[str]] = None, say: Callable[[str], None] = pri
         if c > 0:
             say(f"warmup: {name}: compiled in {c:.1f} s ({time.perf_counter() - w0:.1f} s)")
     return compile_seconds() - c_start
+
+
+def _ignore(samples: dict) -> None:
+    """An ``on_samples`` that takes the rows and does nothing with them."""
 
 
 def currents_off(scene, duration: float) -> None:
