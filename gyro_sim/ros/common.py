@@ -276,8 +276,12 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
 
 
 #: wall s a node process may take to tear down (flush its publishers, destroy the node, shut rclpy down) once its
-#: loop has ended and its bag is closed; beyond it the process exits with its status (bound_teardown)
-TEARDOWN_BUDGET = 20.0
+#: loop has ended and its bag is closed; beyond it the process exits with its status (bound_teardown). With the
+#: GIL-free watchdog's TEARDOWN_LAST s after it, within the launcher's CONTROLLER_GRACE (10 s): a teardown that hangs
+#: (seen in about 1 of 40 node exits under load in rclpy's Node.destroy_node, cause not found) ends the process
+#: itself instead of the launcher's SIGKILL (which it reports as a failure)
+TEARDOWN_BUDGET = 6.0
+TEARDOWN_LAST = 2.0
 
 
 def bound_teardown(who: str, status: Optional[int], budget: Optional[float] = None) -> threading.Timer:
@@ -302,10 +306,10 @@ def bound_teardown(who: str, status: Optional[int], budget: Optional[float] = No
     timer.daemon = True
     timer.start()
     # and a watchdog that needs no GIL (a teardown seen spinning in rclpy's Node.destroy_node with the GIL held, so
-    # the timer above never ran): 5 s later, the threads' tracebacks on stderr and exit status 1
+    # the timer above never ran): TEARDOWN_LAST s later, the threads' tracebacks on stderr and exit status 1
     import faulthandler
 
-    faulthandler.dump_traceback_later(budget + 5.0, exit=True)
+    faulthandler.dump_traceback_later(budget + TEARDOWN_LAST, exit=True)
     return timer
 
 
