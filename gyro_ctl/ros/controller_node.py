@@ -246,9 +246,10 @@ class ControllerNode(Node):
         self.wire = Wire({TOPIC_IMU: self.subs["imu"].msg_type, TOPIC_KINETIC_MOMENT: self.subs["L"].msg_type,
                           TOPIC_STATOR_COMMANDS: self._command_class})
         self.serialized = {kind: self.wire.serialized(t) for kind, t in _TOPIC.items()}
-        self.wire.serialized(TOPIC_STATOR_COMMANDS)
+        self.wire.serialized(TOPIC_STATOR_COMMANDS)  # (checked now, not at the first command)
         # the simulator's state messages read at fixed places (gyro_sim.ros.wire.Template; others decoded whole)
-        self.templates = {k: v for k, v in ((k, state_templates(self.wire).get(t)) for k, t in _TOPIC.items()) if v}
+        by_topic = state_templates(self.wire)
+        self.templates = {k: by_topic[t] for k, t in _TOPIC.items() if t in by_topic}
         self._command_templates: dict = {}  # (names, with rates) -> Template of the command
         self.get_logger().info(f"controller: law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}"
                                + _expected_time_constant(self.scene, cfg))

@@ -31,8 +31,6 @@ def output_times(scene: Scene, T: float, period: Optional[float] = None) -> tupl
     return merge_times(scene.output.sample_times(T), ticks), ticks
 
 
-
-
 def sample_arrays(scene: Scene, terms, attitude: bool, t_rows: np.ndarray, Y: np.ndarray, N: np.ndarray,
                   cur: np.ndarray, rate: np.ndarray, phase: np.ndarray, euler: bool = True) -> dict:
     """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current, rate, phase,

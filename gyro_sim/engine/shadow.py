@@ -26,7 +26,7 @@ import numpy as np
 
 from gyro_sim.compiled import effects
 from gyro_sim.engine.model import AVERAGED_ERROR
-from gyro_sim.physics.frames import symmetry_axis
+from gyro_sim.physics.frames import norm3
 from gyro_sim.scenes.accuracy import FINER, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl, ErrorEstimate
 from gyro_sim.scenes.scene import Scene
 from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
@@ -51,7 +51,7 @@ class ErrorEstimator:
         plan = self.sim.step_size.step_plan
         self.control = ErrorControl(plan, self.sim.attitude, horizon, adapt=not plan.explicit and estimate,
                                     J_min=float(np.min(self.sim.terms.J)), L_bound=self.sim.step_size.L_bound,
-                                    axis=symmetry_axis(self.sim.terms.J), accuracy=scene.accuracy)
+                                    axis=self.sim.terms.sym_axis, accuracy=scene.accuracy)
         self.shadow: Optional[Simulator] = None
         if estimate:
             self.shadow = self.sim.follower()
@@ -143,9 +143,9 @@ class ErrorEstimator:
             self._ck += 1
             # |N| now and its mean since the previous check; whether the shadow's steps were longer there
             # (from the states at the checks alone: the same in every run, whatever its samples)
-            n_now = _norm(sim.torque()) if not seg[1][4] else 0.0
+            n_now = norm3(sim.torque()) if not seg[1][4] else 0.0
             L0, t0, st0, sst0 = self._at_check
-            n_mean = _norm(sim.y[0:3] - L0) / (tb - t0) if tb > t0 else n_now
+            n_mean = norm3(sim.y[0:3] - L0) / (tb - t0) if tb > t0 else n_now
             meas = sim.steps - st0 >= R_MEASURABLE * (sh.steps - sst0)
             self._at_check = (sim.y[0:3].copy(), tb, sim.steps, sh.steps)
             f = self.control.check(tb, sim, sh, method, n_now, n_mean, meas, turned=self._turned)
@@ -216,7 +216,7 @@ class ErrorEstimator:
         else the plan's model), the eddy modes' truncation at the largest slip met, the averaged models' O(ε)."""
         sim, acc = self.sim, self.scene.accuracy
         ctl = self.control
-        L_max = max(ctl.L_max, _norm(sim.y[0:3]), 1e-300)
+        L_max = max(ctl.L_max, norm3(sim.y[0:3]), 1e-300)
         if self.shadow is not None:
             if self.shadow.t == sim.t:
                 ctl.measure(sim, self.shadow)
@@ -267,12 +267,6 @@ class ErrorEstimator:
                              steps_phase=sp if att and sym else math.nan,
                              modes_phase=mp if att and sym else math.nan,
                              phase_tol=phase_tol if att else math.nan, round_off=ro)
-
-
-def _norm(v: np.ndarray) -> float:
-    """|v| of a 3-vector as np.linalg.norm takes it (the square root of its dot product: the same bits), without
-    its overhead."""
-    return math.sqrt(float(v.dot(v)))
 
 
 def _holds(times: np.ndarray, t: float) -> bool:

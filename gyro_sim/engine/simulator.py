@@ -61,8 +61,6 @@ class Simulator:
     max_rate = _model("max_rate", "Each stator's largest |field rate| (k,), rad/s (gyro_sim.scenes.limits).")
     field_B = _model("field_B", "The general field's complex amplitudes B_p (n, 3), T.")
     field_om = _model("field_om", "The general field's angular frequencies ω_p (n,), rad/s.")
-    _free_axis = _model("free_axis", "The free stepper's axis (gyro_sim.compiled.kernels.integrate_free).")
-    _inv_ref = _model("inv_ref", "1 / the free stepper's reference inertia.")
 
     def __init__(self, scene: Scene, attitude: Optional[bool] = None, horizon: Optional[float] = None,
                  quiet: bool = False, warn_plan: bool = True):
@@ -107,7 +105,7 @@ class Simulator:
                                   quiet=quiet)
         # (warn_plan False: the caller warns, StepSize.warn_plan, once the step budget has passed the plan: Runner)
         if not quiet and not is_legacy() and warn_plan:
-            self._warn_plan()
+            self.step_size.warn_plan(self.state())
 
     def follower(self) -> "Simulator":
         """A shadow run of this one (the error control's: :class:`gyro_sim.engine.shadow.ErrorEstimator`): the same
@@ -145,19 +143,9 @@ class Simulator:
         return self.step_size.rates
 
     @property
-    def L_bound(self) -> float:
-        """The largest |L| the run can reach (N m s; gyro_sim.accuracy.ErrorControl)."""
-        return self.step_size.L_bound
-
-    @property
     def slip_met(self) -> float:
         """The largest slip bound met at a step plan (rad/s): the modes' error is judged there."""
         return self.step_size.slip_met
-
-    @property
-    def methods_used(self) -> set:
-        """The steppers the run's segments took."""
-        return self.step_size.methods_used
 
     def planned_steps(self, plan=None) -> float:
         """The steps the run's plan predicts over its horizon (:meth:`gyro_sim.engine.step_size.StepSize.
@@ -168,9 +156,6 @@ class Simulator:
         """The plan this run would take at tolerances ``rtol`` and ``attitude`` (rad, None: none) instead of the
         scene's (:meth:`gyro_sim.engine.step_size.StepSize.plan_for`)."""
         return self.step_size.plan_for(rtol, attitude, **accuracy)
-
-    def _warn_plan(self, om_plan: Optional[float] = None) -> None:
-        self.step_size.warn_plan(self.state())
 
     def _method(self) -> str:
         """The stepper a field step would take now (:meth:`gyro_sim.engine.step_size.StepSize.choose`)."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from gyro_sim.compiled import effects, frozen_flow, qs_flow
 from gyro_sim.engine.model import FROZEN_FLOW_COST, lawson8_cost
-from gyro_sim.physics.frames import _column
+from gyro_sim.physics.frames import _column, norm3
 from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan, field_rates,
                                       is_legacy, step_plan)
 from gyro_sim.scenes.accuracy import warn as accuracy_warning
@@ -329,9 +329,7 @@ class StepSize:
         """Note the slip bound of a new command segment (fastest field rate ``om`` + |Ω| now, rad/s) in ``slip_met``;
         warn once where it passes the slip the eddy modes were chosen for (a command or law beyond the scene's
         rates: gyro_sim.accuracy.mode_plan) and the modes then miss the tolerance."""
-        y = st.y
-        L = y[0:3]  # (|L| as np.linalg.norm takes it, the same bits: sqrt of the dot product)
-        slip = max(map(abs, om.tolist()), default=0.0) + math.sqrt(float(L.dot(L))) * self.terms.Jinv_max
+        slip = max(map(abs, om.tolist()), default=0.0) + norm3(st.y[0:3]) * self.terms.Jinv_max
         self.slip_met = max(self.slip_met, slip)
         mp = self.mode_plan
         if (self._slip_warned or self.quiet or mp.kind in (None, "thin_shell") or mp.n == 0

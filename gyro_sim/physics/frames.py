@@ -207,6 +207,12 @@ def attitude_split_one(q1, q2, axis: int, L1, L2) -> tuple[float, float]:
     return _angle_one(l1, l2) + abs(th1 - th2), max(twist, _angle_one(u1, u2) * abs(math.sin(th2)))
 
 
+def norm3(v: np.ndarray) -> float:
+    """|v| of a 3-vector as np.linalg.norm takes it (the square root of its dot product: the same bits), without
+    its overhead (a few µs a call: the step plan and the error control ask at every segment and check)."""
+    return math.sqrt(float(v.dot(v)))
+
+
 def _column(w: float, x: float, y: float, z: float, axis: int) -> tuple[float, float, float]:
     """Column ``axis`` of :func:`quat_to_matrix` of one quaternion: the body axis in the case frame."""
     if axis == 0:

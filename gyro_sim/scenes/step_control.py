@@ -8,7 +8,7 @@ from typing import Optional
 
 import numpy as np
 
-from gyro_sim.physics.frames import attitude_split_one
+from gyro_sim.physics.frames import attitude_split_one, norm3
 from gyro_sim.scenes.scene_text import SceneError
 from gyro_sim.scenes.tolerance import (LEGACY_RATE_CHANGE, LEGACY_STEPS_PER_TURN, STEP_SHARE, has_symmetry_axis,
                                       is_legacy, phase_tolerance, planning_attitude)
@@ -455,18 +455,16 @@ class ErrorControl:
     def _diff(self, main, shadow) -> tuple[float, float, float, float]:
         """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase)."""
         L, Ls = main.y[0:3], shadow.y[0:3]
-        dL = L - Ls  # (|v| as np.linalg.norm takes it: the square root of the dot product, the same bits)
-        dLn = abs(math.sqrt(float(L.dot(L))) - math.sqrt(float(Ls.dot(Ls))))
+        dLn = abs(norm3(L) - norm3(Ls))
         dq = dp = 0.0
         if self.attitude:
             d, p = attitude_split_one(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
             dq, dp = float(d), float(p)
-        return dLn, math.sqrt(float(dL.dot(dL))), dq, dp
+        return dLn, norm3(L - Ls), dq, dp
 
     def measure(self, main, shadow) -> tuple[float, float, float, float, float, float]:
         """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
-        L = main.y[0:3]
-        self.L_max = max(self.L_max, math.sqrt(float(L.dot(L))))
+        self.L_max = max(self.L_max, norm3(main.y[0:3]))
         raw = self._diff(main, shadow)
         dL, dq, dp = self._now(main, shadow, raw=raw)
         self.dL = max(self.dL, self.banked[0] + dL)
@@ -540,7 +538,7 @@ class ErrorControl:
                 # a relative phase tolerance follows the phase the run turns: so far, and ahead at today's rate (the
                 # plan's took the fastest rate the run can reach over all of it; the early checks, where a spin-up
                 # has turned little, keep the plan's)
-                om_now = math.sqrt(float(main.y[0:3].dot(main.y[0:3]))) / self.J_min
+                om_now = norm3(main.y[0:3]) / self.J_min
                 tol_p = min(tol_p, STEP_SHARE * phase_tolerance(acc, 1.0, turned + om_now * left))
             for tol, e, d, d0, k in ((plan.tol_q, e_q, dq, dq0, k_cone), (tol_p, e_p, dp, dp0, 1.0)):
                 if not math.isfinite(tol):
