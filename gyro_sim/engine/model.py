@@ -102,6 +102,16 @@ def stator_triad(u: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray
 AVERAGED_ERROR = 0.5
 
 
+def frozen_flow_cost(n_modes: int, n_phasors: int = 1) -> float:
+    """A frozen-flow step's CPU time in lawson8 steps with ``n_modes`` eddy modes and ``n_phasors`` field phasors:
+    :data:`FROZEN_FLOW_COST` (1 + modes) a phasor. Its terms are products of a phasor with each of the moment's
+    9 (phasors + modes) terms, so it grows with the phasors (a lawson8 step barely does): measured on a thin shell
+    (one mode) 6.9, 15.8, 28.5 µs with 1, 2, 3 phasors against lawson8's 1.9 µs (3.6x, 8.5x, 15x); with ten modes
+    28, 56, 88 µs against 2.1 µs (13x, 27x, 40x). ``auto`` takes frozen_flow where its step is this many times
+    lawson8's (:meth:`gyro_sim.engine.step_size.StepSize.choose`)."""
+    return FROZEN_FLOW_COST * (1 + n_modes) * n_phasors
+
+
 def lawson8_cost(n_modes: int) -> float:
     """A lawson8 step's CPU time in ETDRK4 steps with ``n_modes`` eddy modes: measured 2.1 (one mode), 3.3 (50),
     4.7 (200) on constant_field and spinup_solid_sphere (1.6, 2.7, 7.2 µs against 0.8, 0.8, 1.6 µs)."""

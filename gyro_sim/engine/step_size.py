@@ -22,7 +22,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from gyro_sim.compiled import effects, frozen_flow, qs_flow
-from gyro_sim.engine.model import FROZEN_FLOW_COST, lawson8_cost
+from gyro_sim.engine.model import FROZEN_FLOW_COST, frozen_flow_cost, lawson8_cost
 from gyro_sim.physics.frames import _column, norm3
 from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan, field_rates,
                                       is_legacy, step_plan)
@@ -150,7 +150,7 @@ class StepSize:
                 h_def = self.max_step(False, m, st, ap.steps_per_turn[m])
                 if held:
                     h_def = min(h_def, terms.tau_min)
-                if h_ff >= FROZEN_FLOW_COST * (1 + terms.tau.size) * h_def:
+                if h_ff >= frozen_flow_cost(terms.tau.size, self.phasor_count(st)) * h_def:
                     # the quasi-static model: the quasi-static flow step instead (gyro_sim/compiled/qs_flow.py)
                     m = "qs_flow" if self.qs_applies() else "frozen_flow"
                     self._check_knob(m)
@@ -159,6 +159,14 @@ class StepSize:
             return m, h
         self._check_knob(m)
         return m, self.max_step(False, m, st)
+
+    def phasor_count(self, st: State) -> int:
+        """Field phasors of a segment from state ``st`` (the stators with current, the general field's terms), at
+        least one; one in the old defaults' runs (:func:`gyro_sim.scenes.tolerance.legacy`: their rule, which
+        counted none)."""
+        if is_legacy():
+            return 1
+        return max(1, sum(1 for c in st.current.tolist() if c > 0) + int(self.terms.field_om.size))
 
     def qs_applies(self) -> bool:
         """Whether ``auto`` takes the quasi-static flow step (gyro_sim/compiled/qs_flow.py) where it would take
