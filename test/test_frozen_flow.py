@@ -177,3 +177,26 @@ def test_the_compiled_torque_scale_is_the_formula():
         a, b = _torque_scale_numpy(*args), torque_scale(*args)
         worst = max(worst, abs(a - b) / abs(a))
     report("compiled torque scale against the formula (relative)", worst, 1e-13)
+
+
+def test_auto_counts_the_field_phasors_in_the_frozen_flow_cost():
+    """A frozen-flow step's terms are products of each field phasor with the moment's 9 (phasors + modes) terms, so
+    it costs more the more stators are on (measured on a thin shell: 3.6x, 8.5x, 15x a lawson8 step with 1, 2, 3
+    phasors); ``auto`` weighs FROZEN_FLOW_COST (1 + modes) lawson8 steps a phasor (model.frozen_flow_cost). The
+    ψ-switching scenes' three stators on: lawson8 (before: frozen_flow, its step 4.3x lawson8's at 15x the cost, and
+    the run 8x the old defaults' CPU); z3 alone, or with z1: frozen_flow; the old defaults' runs keep their rule."""
+    from gyro_sim.engine.model import FROZEN_FLOW_COST, frozen_flow_cost
+    from gyro_sim.scenes.tolerance import legacy
+
+    on = {"controller": None, "stators.0.current": 0.316, "stators.1.current": 0.316, "stators.2.current": 0.5,
+          "stators.0.rate": 3000.0, "stators.1.rate": 5000.0}
+
+    def method(**ov):
+        return Simulator(load_scene("nutation_oblate", overrides={**on, **ov}))._method()
+
+    assert frozen_flow_cost(1) == FROZEN_FLOW_COST * 2 and frozen_flow_cost(1, 3) == 3 * frozen_flow_cost(1)
+    assert method() == "lawson8"
+    assert method(**{"stators.1.current": 0.0}) == "frozen_flow"
+    assert method(**{"stators.0.current": 0.0, "stators.1.current": 0.0}) == "frozen_flow"
+    with legacy():
+        assert method() == "lawson8"
