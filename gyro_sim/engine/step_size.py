@@ -98,11 +98,14 @@ class StepSize:
         """(stepper, largest step s) of a command segment starting at state ``st`` (:meth:`choose`), the step
         divided by ``step_div`` (the error control's); a shadow (``lead``: its leader's) takes its leader's stepper
         and SHADOW_RATIO times its leader's step, within SHADOW_RATIO times the leader's longest span."""
-        method, h_max = self.choose(free, st)
-        if lead is not None:  # a shadow: the leader's stepper (decided on its state), SHADOW_RATIO times its step
-            lm = lead.method if lead.method is not None else method
-            if lm != method:
-                method, h_max = lm, self.h_for(lm, st)
+        if lead is not None and lead.method is not None:
+            # a shadow: the leader's stepper (decided on its state), at its own step from its state (what choose
+            # gives for that stepper, without weighing the others: the frozen-flow step's torque scale)
+            method, h_max = lead.method, self.h_for(lead.method, st)
+            self.methods_used.add(method)
+        else:
+            method, h_max = self.choose(free, st)
+        if lead is not None:  # a shadow: SHADOW_RATIO times its leader's step
             div = lead.step_div / SHADOW_RATIO[method]
         else:
             div = step_div
