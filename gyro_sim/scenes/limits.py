@@ -227,6 +227,9 @@ def command_problem(sim, k: int, current: Optional[float], rate: Optional[float]
     ``current`` A / ``rate`` rad/s (None: unchanged) is allowed, else the one-line reason naming the stator, the
     value and the limit (the in-process :meth:`Simulator.set_stators` and the simulator node's commands say the
     same)."""
+    if ((current is None or (math.isfinite(real_value(current)) and 0 <= current <= sim.max_current[k]))
+            and (rate is None or (math.isfinite(real_value(rate)) and abs(rate) <= sim.max_rate[k]))):
+        return ""  # (allowed: no name to preview, at every command of a run)
     name = preview(sim.stator_names[k], 40)
     if current is not None:
         if not (math.isfinite(real_value(current)) and current >= 0):
