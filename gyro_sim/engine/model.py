@@ -20,9 +20,9 @@ from gyro_sim.scenes.scene import Scene
 #: ``Simulator.step_plan``); these stay as the benchmark's "today's defaults" (gyro_sim/apps/bench.py)
 DEFAULT_STEPS_PER_TURN = {"lawson8": 12, "etdrk4": 48, "free": 48}
 DEFAULT_RATE_CHANGE = 1e-4
-#: a frozen-flow step costs about this many lawson8 steps per (1 + number of eddy modes): 8 µs against
-#: 1.9 µs with one phasor and one mode, 17–28 µs with ten modes (measured on the default scene and
-#: spinup_solid_sphere); ``auto`` takes it where its step is that many times longer
+#: a frozen-flow step costs about this many lawson8 steps per (1 + number of eddy modes) and field phasor: 8 µs
+#: against 1.9 µs with one phasor and one mode, 17–28 µs with ten modes (measured on the default scene and
+#: spinup_solid_sphere); ``auto`` takes it where its step is that many times longer (:func:`frozen_flow_cost`)
 FROZEN_FLOW_COST = 2.0
 #: control laws that read only t, L and the stators (not q, θ or Ω_b): with one of them (or none) a scene may
 #: run without attitude; any other law (psi_switching, reorient: θ and the polar axis) keeps it
