@@ -22,7 +22,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from gyro_sim.compiled import effects, frozen_flow, qs_flow
-from gyro_sim.engine.model import FROZEN_FLOW_COST, frozen_flow_cost, lawson8_cost
+from gyro_sim.engine.model import frozen_flow_cost, lawson8_cost
 from gyro_sim.physics.frames import _column, norm3
 from gyro_sim.scenes.accuracy import (PHASE_REL_MIN, RATE_KNOB, SHADOW_RATIO, STEPS_WARN, auto_plan, field_rates,
                                       is_legacy, step_plan)
@@ -122,7 +122,8 @@ class StepSize:
         RKMK attitude) unless an eddy mode is stiff at the lawson8 step (h > 2 τ_n: the integrating
         factor then loses the order), else ``etdrk4``; ``auto`` takes ``frozen_flow`` instead where it
         applies (axisymmetric rotor, no effects) and its step is long enough to be cheaper
-        (:data:`FROZEN_FLOW_COST`); ``free`` for the torque-free stepper."""
+        (:func:`gyro_sim.engine.model.frozen_flow_cost`: its cost grows with the field phasors); ``free`` for the
+        torque-free stepper."""
         terms = self.terms
         if free:
             self._check_knob("free")
