@@ -27,7 +27,7 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.engine.model import AVERAGED_ERROR
 from gyro_sim.physics.frames import norm3
-from gyro_sim.scenes.accuracy import FINER, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl, ErrorEstimate
+from gyro_sim.scenes.accuracy import FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl, ErrorEstimate
 from gyro_sim.scenes.scene import Scene
 from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
 
@@ -59,6 +59,7 @@ class ErrorEstimator:
         self._ck = 0  # the next check
         self._at_check = (self.sim.y[0:3].copy(), 0.0, 0, 0)  # (L, t, steps, shadow steps) at the previous check
         self._steps_seen = 0
+        self._from_change = False  # whether the shadow's last stop was a command change (sync_shadow)
         self._impulse = 0.0  # ∫|N| dt over the output samples (N·m·s): the modes' error of L
         self._L_seen = sim.y[0:3].copy()  # L at the last output sample (N·m·s)
         self._spin_dev = 0.0  # ∫ | |Ω| − |Ω0| | dt (rad): the modes' error of the spin phase
@@ -173,10 +174,20 @@ class ErrorEstimator:
         k, span = sim.steps - self._steps_seen, t - sh.t
         h = sh._segment()[6]
         finer = 0.0  # (> 0: the shadow follows finer; the run's steps there over its plan's, what they weigh)
-        if change and math.isfinite(h) and h > 0 and 0 < k < R_MEASURABLE * math.ceil(span / h):
+        ratio = FINER
+        # (a stretch from a command change to a check is cut by the commands as much: followed finer too; one from
+        # the start or from a check to a check is not)
+        cut = change or self._from_change
+        self._from_change = change
+        if cut and math.isfinite(h) and h > 0 and 0 < k < R_MEASURABLE * math.ceil(span / h):
             h_run = sim._seg[1][6]
             finer = min(span / k / h_run, 1.0) if math.isfinite(h_run) and h_run > 0 else 1.0
-            gap, sh.lead_gap = sh.lead_gap, span / (k * FINER * SHADOW_RATIO[sh._segment()[5]])
+            # (steps no longer than FINER_TAU τ_min either: across a field switch the run's longer steps span the
+            # modes' transient, where the error is not a power of the step)
+            tau = sim.tau_min
+            if math.isfinite(tau) and tau > 0:
+                ratio = max(FINER, span / k / (FINER_TAU * tau))
+            gap, sh.lead_gap = sh.lead_gap, span / (k * ratio * SHADOW_RATIO[sh._segment()[5]])
             sh.replan()
         try:
             sh.advance(t)
@@ -184,18 +195,19 @@ class ErrorEstimator:
             if finer > 0:
                 sh.lead_gap = gap
                 sh.replan()
-        self.count_stretch(sh.steps - s0, finer)
+        self.count_stretch(sh.steps - s0, finer, ratio)
 
-    def count_stretch(self, shadow_steps: int, finer: float = 0.0) -> None:
+    def count_stretch(self, shadow_steps: int, finer: float = 0.0, ratio: float = FINER) -> None:
         """Count the stretch the shadow has just followed (``shadow_steps`` of its steps, the run's since the last
-        count; ``finer`` > 0: its steps FINER times shorter than the run's, the run's steps that fraction of its
-        plan's, ErrorControl.note_method) for the error control's Richardson
+        count; ``finer`` > 0: its steps ``ratio`` (FINER or more) times shorter than the run's, the run's steps that
+        fraction of its plan's, ErrorControl.note_method) for the error control's Richardson
         denominator, under the run's present segment's stepper."""
         sim = self.sim
         assert sim._seg is not None  # (it has advanced)
         _, _, _, _, free, method, h = sim._seg[1]
         self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
-                                 exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min, finer=finer)
+                                 exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min, finer=finer,
+                                 finer_ratio=ratio)
         self._steps_seen = sim.steps
 
     def resync_shadow(self) -> None:

@@ -95,6 +95,7 @@ from gyro_sim.scenes.step_control import (  # noqa: F401  (the names of the accu
     CHECKS,
     R_MEASURABLE,
     FINER,
+    FINER_TAU,
     AIM,
     REFINE_MAX,
     EARLY_RHO,

@@ -243,6 +243,13 @@ R_MEASURABLE = 1.3
 #: shadow follows that stretch with steps this many times shorter than the run's instead (step doubling, the run the
 #: coarser: the difference is the run's error less 1/FINER^p of it; ErrorEstimator.sync_shadow)
 FINER = 2.0
+#: ... and with steps at most this many τ_min (the fastest eddy mode's time constant) where the run's steps there are
+#: longer: a step across a field switch spans the modes' transient, and beyond ~τ the frozen-flow step's error is not
+#: a power of its step (z3 spin field on/off every 0.5 ms, τ 0.26 ms, one 0.5 ms step a stretch: its error over 1,
+#: 2, 3, 4, 8 steps a stretch 9.5, 8.7, 4.3, 2.5, 0.65e-12, h² only from 3 steps on): the shadow at half the run's
+#: step erred 0.91 of the run and the estimate was 1.2x below the true L error. At τ_min/4 its error is below
+#: 1/F of the run's (F its ratio to the run's steps), which the denominator 1 − F^−p (p ≥ 1) needs
+FINER_TAU = 0.25
 #: the step share of the tolerance a run aims its projected error at (a margin for the estimate's own error)
 AIM = 0.5
 #: a run refines its step by at most this factor at a check, coarsens it by at most COARSEN, and keeps its step
@@ -366,7 +373,9 @@ class ErrorControl:
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
         self.shadow_len: dict = {}  # the same, at least the run's over SHADOW_RATIO (the steps' lengths, note_method)
-        self.finer: dict = {}  # the run's steps of each stepper over the stretches the shadow followed finer
+        # the run's steps of each stepper over the stretches the shadow followed finer, by (stepper, the ratio of the
+        # run's steps to the shadow's there)
+        self.finer: dict = {}
         self.est = (0.0, 0.0, 0.0)  # the estimate's running maxima (|ΔL|, directions, phase; denom_estimate)
         self.banked_est = (0.0, 0.0, 0.0)
         # (t, |ΔL|, direction error, phase error, error of |L|) now, at the previous check
@@ -403,18 +412,20 @@ class ErrorControl:
                     r = max(min(r, k / max(self.shadow_len.get(m, k), 1)), R_MEASURABLE)
                 acc += k / (r ** ORDER.get(m, STIFF_ORDER) - 1.0)
                 n += k
-        for m, k in self.finer.items():  # (the shadow the finer: the difference is the run's error less 1/r^p of it)
-            acc += k / (1.0 - FINER ** -ORDER.get(m, STIFF_ORDER))
+        for (m, f), k in self.finer.items():  # (the shadow the finer: the difference is the run's error less 1/f^p of
+            acc += k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))  # it, f its steps' ratio to the run's there)
             n += k
         return n / acc if acc > 0 else math.inf
 
     def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
-                    stiff: bool = False, finer: float = 0.0) -> None:
+                    stiff: bool = False, finer: float = 0.0, finer_ratio: float = FINER) -> None:
         """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
         with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`); ``finer``: a stretch the shadow
         followed with steps at most 1/:data:`FINER` of the run's (:meth:`ErrorEstimator.sync_shadow`), its value the
         error the run's steps there make against steps of the run's plan, (h / h_plan)^p ≤ 1: a stretch cut short (an
-        early check, T/4096) weighs little beside the stretches of whole steps."""
+        early check, T/4096) weighs little beside the stretches of whole steps; ``finer_ratio``: how many times shorter
+        the shadow's steps were there (:data:`FINER`, more where the run's steps are longer than :data:`FINER_TAU`
+        τ_min)."""
         # the estimate's r is of the steps' lengths, not of their counts: where the run's own stops (samples, ticks)
         # cut its steps it takes more than SHADOW_RATIO times the shadow's, but its longest steps, which make its
         # error, are still only SHADOW_RATIO times shorter than the shadow's (magnetizable_body: counts 3.3, r^8 − 1
@@ -425,7 +436,8 @@ class ErrorControl:
             method = STIFF
         if not exact and steps and finer:
             w = max(min(finer, 1.0) ** ORDER.get(method, STIFF_ORDER), 1e-300)
-            self.finer[method] = self.finer.get(method, 0) + steps * w
+            key = (method, finer_ratio)
+            self.finer[key] = self.finer.get(key, 0) + steps * w
         elif not exact and steps:
             self.weights[method] = self.weights.get(method, 0) + steps
             self.shadow_steps[method] = self.shadow_steps.get(method, 0) + shadow_steps
