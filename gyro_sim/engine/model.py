@@ -115,9 +115,9 @@ def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray,
     the in-process controller and the controller node see identical numbers.
     """
     if q.size == 4 and L.size == 3 and q.shape[:-1] == L.shape[:-1]:  # one state (a tick's): scalar code, the same
-        R = _matrix(*q.ravel().tolist())  # bits (the same IEEE operations in the same order), ~3 µs, not ~20
+        M = _matrix(*q.ravel().tolist())  # bits (the same IEEE operations in the same order), ~3 µs, not ~20
         L0, L1, L2 = L.ravel().tolist()
-        Lb = [R[0][j] * L0 + R[1][j] * L1 + R[2][j] * L2 for j in range(3)]
+        Lb = [M[0][j] * L0 + M[1][j] * L1 + M[2][j] * L2 for j in range(3)]
         J0, J1, J2 = (J.tolist() if isinstance(J, np.ndarray) else [float(v) for v in J])
         return (np.array(Lb).reshape(L.shape),
                 np.array([Lb[0] / J0, Lb[1] / J1, Lb[2] / J2]).reshape(L.shape))

@@ -40,26 +40,26 @@ def sample_arrays(scene: Scene, terms, attitude: bool, t_rows: np.ndarray, Y: np
     stators' columns): the rows; ``terms``: the run's model (:class:`gyro_sim.engine.terms.Terms`)."""
     L, q = Y[:, 0:3], Y[:, 3:7]
     extra = {}
-    want_energy, energy = energy, None
+    E: Optional[np.ndarray] = None
     if not attitude:
         omega_b = terms.body_rates(t_rows, Y)
-        if want_energy:
-            energy = kinetic_energy(terms.J, omega_b)  # isotropic: frame-free
+        if energy:
+            E = kinetic_energy(terms.J, omega_b)  # isotropic: frame-free
     elif terms.eff[effects.ON]:
         t = t_rows
         omega_b = terms.body_rates(t, Y)
         extra = terms.effect_outputs(t, Y)
-        if want_energy:
-            energy = system_energy(scene, omega_b, extra)  # the body's and its internal bodies'
+        if energy:
+            E = system_energy(scene, omega_b, extra)  # the body's and its internal bodies'
     else:
         _, omega_b = body_rates(terms.J, L, q)
-        if want_energy:
-            energy = kinetic_energy(terms.J, omega_b)
+        if energy:
+            E = kinetic_energy(terms.J, omega_b)
     eul = None
     if euler:
         eul = euler_angles(quat_to_matrix(q), L) if attitude else np.full((L.shape[0], 3), np.nan)
     return {"t": t_rows, "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": N,
-            "energy": energy, "current": cur, "rate": rate, "phase": phase,
+            "energy": E, "current": cur, "rate": rate, "phase": phase,
             "modes": Y[:, 7:7 + 3 * terms.tau.size], "effects": extra}
 
 

@@ -92,7 +92,7 @@ class ErrorEstimator:
                 self.sync_shadow(change=True)  # (the shadow reaches the change before it takes it)
             self.shadow.set_stators(by_index)
 
-    def accumulate(self, sel: np.ndarray, Ln: np.ndarray, N_rows: np.ndarray, L_rows: np.ndarray) -> None:
+    def accumulate(self, sel: np.ndarray, Ln: "np.ndarray | list", N_rows: np.ndarray, L_rows: np.ndarray) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt (the modes' error bound, :meth:`error_estimate`) and the phase turned
         over new sound output samples: their times ``sel`` (s), |L| ``Ln`` (N m s; an array or a list), torques
         ``N_rows`` (N m) and kinetic moments ``L_rows`` (N m s, inertial frame)."""

@@ -127,7 +127,7 @@ STAMP_PATHS = (("header", "stamp", "sec"), ("header", "stamp", "nanosec"))
 _VECTOR = STAMP_PATHS + tuple(("vector", k) for k in "xyz")
 #: topic -> where the numbers of its per-sample message are (the builders' dicts: gyro_sim.io.messages); the stators'
 #: and the commands' (a JointState's stamp, position, velocity, effort) follow from their lengths (BagRecorder._encode)
-_NUMBER_PATHS = {
+_NUMBER_PATHS: dict[str, tuple] = {
     TOPIC_CLOCK: (("clock", "sec"), ("clock", "nanosec")),
     TOPIC_IMU: STAMP_PATHS + tuple(("orientation", k) for k in "xyzw") + tuple(("angular_velocity", k) for k in "xyz"),
     TOPIC_KINETIC_MOMENT: _VECTOR, TOPIC_EULER: _VECTOR, TOPIC_TORQUE: _VECTOR,
@@ -402,7 +402,7 @@ class BagRecorder:
         :meth:`_serialize`. ``fields``: a builder's dict (:func:`gyro_sim.io.messages.state_messages`,
         :func:`gyro_sim.io.messages.command_message`), whose strings and constants are its topic's own; a JointState's
         names and lengths are part of its shape."""
-        paths = _NUMBER_PATHS.get(topic)
+        paths: Optional[tuple] = _NUMBER_PATHS.get(topic)
         if paths is None:
             return self._serialize(topic, fields)
         key: tuple = (topic,)
