@@ -411,8 +411,6 @@ class Loop:
                              control_period=self.p["control_period"], buffer_rows=STREAM_BUFFER_ROWS,
                              force=bool(self.p["force"]))
         self.names = list(self.runner.sim.stator_names)
-        sim = self.runner.sim  # (the limits as lists of floats: parse_command reads them at every command)
-        self.limits = (sim.max_current.tolist(), sim.max_rate.tolist())
         node.faults = Faults(node.fault_config, len(self.names)) if node.fault_config.active else None
         self.latest = None  # latest valid command (names, current, rate, stamp_ns)
         self.have_cmd = False
@@ -512,7 +510,8 @@ class Loop:
         published since the previous tick are dropped quietly (a controller may answer every sample, and a state
         published again gets a second answer); any other stamp is refused and reported, and feeds no watchdog.
         """
-        cmd, why = parse_command(msg, self.names, self.limits)
+        sim = self.runner.sim
+        cmd, why = parse_command(msg, self.names, (sim.max_current, sim.max_rate))
         if cmd is None:
             # one report a second per kind of refusal, whatever finite values are in it (a sender of changing bad
             # values must not flood the status topic either); NaN and inf stay kinds of their own
