@@ -15,7 +15,8 @@ from gyro_sim.io.messages import (TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KIN
                                   TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_TORQUE, TOPICS, command_message,
                                   state_messages, to_ros)
 from gyro_sim.ros.common import message_class  # noqa: E402
-from gyro_sim.ros.wire import STAMP_PATHS, Template, Wire, command_view, state_templates  # noqa: E402
+from gyro_sim.ros.wire import (STAMP_PATHS, CommandReader, Template, Wire, command_view, state_bytes,  # noqa: E402
+                               state_templates)
 
 HOT = (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_EULER, TOPIC_TORQUE, TOPIC_STATORS, TOPIC_STATOR_COMMANDS)
 
@@ -100,3 +101,56 @@ def test_undecodable_bytes_are_rclpys_to_judge(wire):
     raw = bytes(cdr_message(TOPIC_STATOR_COMMANDS, command_message(1.0, ["a"], [1.0], None)))
     with pytest.raises(Exception):  # noqa: B017 - rclpy's own error, whatever its type
         wire.decode(TOPIC_STATOR_COMMANDS, raw[:10])
+
+
+def test_state_bytes_are_the_builders_bytes(wire):
+    """The simulator node's per-tick state messages straight from the numbers (state_bytes) are the bytes the
+    builders' dicts give through the same templates, and rosbags' whole serialization of them."""
+    tmpl = state_templates(wire)
+    topics = (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT)
+    for state in random_states(300, seed=11):
+        msgs = state_messages(*state)
+        L, q, w = (np.asarray(v, dtype=float).tolist() for v in (state[1], state[2], state[3]))
+        got = state_bytes(tmpl, topics, stamp_ns(state[0]), L, q, w)
+        assert got == [tmpl[t].encode_fields(msgs[t]) for t in topics]
+        assert got == [bytes(cdr_message(t, msgs[t])) for t in topics]
+
+
+def test_command_reader_reads_as_the_whole_decoding(wire):
+    """The simulator's reading of commands (CommandReader: a shape seen before by its template) gives the view the
+    whole decoding gives (command_view), for commands of several shapes interleaved (with and without rates, other
+    names, an empty one, a frame id, NaN and huge values, rclpy's own bytes), and reads most of them by template."""
+    cls = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
+    reader = CommandReader(wire)
+    rng = np.random.default_rng(7)
+    shapes = [(["s1", "s2", "s3"], True), (["s1", "s2", "s3"], False), (["s2"], True), ([], False),
+              (["s3", "s1"], False)]
+    raws = []
+    for k in range(400):
+        names, with_rates = shapes[k % len(shapes)]
+        cur = [float(c) for c in rng.uniform(0, 5, len(names))]
+        rate = [float(r) for r in rng.standard_normal(len(names)) * 100] if with_rates else None
+        if k % 37 == 5 and names:
+            cur[0] = math.nan if k % 2 else 1e308
+        fields = command_message(float(rng.uniform(0, 1e4)), names, cur, rate)
+        if k % 50 == 7:
+            fields["header"]["frame_id"] = "somewhere"
+        raw = bytes(cdr_message(TOPIC_STATOR_COMMANDS, fields))
+        raws.append(raw if k % 13 != 3 else bytes(serialize_message(to_ros(cls, fields))))
+    taken = []
+    reader_decode = wire.decode
+    calls = []
+    wire.decode = lambda topic, raw: (calls.append(1), reader_decode(topic, raw))[1]
+    try:
+        for raw in raws:
+            taken.append(reader.read(raw))
+    finally:
+        del wire.decode
+    for raw, view in zip(raws, taken, strict=True):
+        whole = command_view(reader_decode(TOPIC_STATOR_COMMANDS, raw))
+        assert (view.name, view.header.stamp.sec, view.header.stamp.nanosec, view.header.frame_id) == (
+            whole.name, whole.header.stamp.sec, whole.header.stamp.nanosec, whole.header.frame_id)
+        for a, b in ((view.effort, whole.effort), (view.velocity, whole.velocity)):
+            assert len(a) == len(b) and all(type(x) is float for x in a)
+            assert all(x == y or (math.isnan(x) and math.isnan(y)) for x, y in zip(a, b, strict=True))
+    assert len(calls) < len(raws) // 4, f"{len(calls)} of {len(raws)} commands decoded whole"

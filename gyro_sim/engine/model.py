@@ -11,7 +11,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from gyro_sim.compiled import kernels
-from gyro_sim.physics.frames import attitude_from_euler, quat_to_matrix
+from gyro_sim.physics.frames import _matrix, attitude_from_euler, quat_to_matrix
 from gyro_sim.scenes.scene import Scene
 
 
@@ -124,6 +124,13 @@ def body_rates(J: np.ndarray, L: np.ndarray, q: np.ndarray) -> tuple[np.ndarray,
     Written element by element (no BLAS) so a row gives the same bits alone or in a batch:
     the in-process controller and the controller node see identical numbers.
     """
+    if q.size == 4 and L.size == 3 and q.shape[:-1] == L.shape[:-1]:  # one state (a tick's): scalar code, the same
+        M = _matrix(*q.ravel().tolist())  # bits (the same IEEE operations in the same order), ~3 µs, not ~20
+        L0, L1, L2 = L.ravel().tolist()
+        Lb = [M[0][j] * L0 + M[1][j] * L1 + M[2][j] * L2 for j in range(3)]
+        J0, J1, J2 = (J.tolist() if isinstance(J, np.ndarray) else [float(v) for v in J])
+        return (np.array(Lb).reshape(L.shape),
+                np.array([Lb[0] / J0, Lb[1] / J1, Lb[2] / J2]).reshape(L.shape))
     R = quat_to_matrix(q)
     Lb = R[..., 0, :] * L[..., 0:1] + R[..., 1, :] * L[..., 1:2] + R[..., 2, :] * L[..., 2:3]
     return Lb, Lb / J

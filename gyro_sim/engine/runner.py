@@ -226,13 +226,20 @@ class Runner:
         return out
 
     # --- the samples: checked, then summed by the error estimate --------------------------------
-    def _check_samples(self, sel: np.ndarray, r: slice) -> tuple[int, np.ndarray]:
+    def _check_samples(self, sel: np.ndarray, r: slice) -> tuple[int, "np.ndarray | list"]:
         """How many of the new output samples (times ``sel``, buffer rows ``r``) hold a sound state: finite (L, the
         attitude where it is integrated, the eddy modes and effects' states, the torque) with |L| within
         :attr:`L_sound` (:func:`gyro_sim.scenes.limits.L_limit`: what the fields can drive; the kinetic energy is at
         most |L|²/(2 J_min)), and their |L| (N m s). At the first that does not, the run fails: :attr:`failure` says
         what and when, the output ends with the sample before (:attr:`row`) and :attr:`done` is True."""
         y = self.out_y[r]
+        if sel.size == 1 and self.sim.attitude:  # one sample (a tick's): scalar code for the sound case (the same |L|
+            # bits as np.linalg.norm's: x*x + y*y + z*z in that order); a sum that is not finite (a NaN or inf in the
+            # row, or finite values whose sum overflows) and a large |L| take the general path below
+            L0, L1, L2 = y[0, 0:3].tolist()
+            Ln1 = math.sqrt(L0 * L0 + L1 * L1 + L2 * L2)
+            if math.isfinite(float(y.sum()) + float(self.out_N[r].sum())) and not Ln1 > self.L_sound:
+                return 1, [Ln1]
         if self.sim.attitude:  # (every column of y: L, q, the modes and effects' states)
             ok = np.isfinite(y).all(axis=1) & np.isfinite(self.out_N[r]).all(axis=1)
         else:
@@ -326,13 +333,14 @@ class Runner:
         self.advance()  # to the break, sampled
         return slice(first, self.row)
 
-    def samples(self, rows: slice, euler: bool = True) -> dict:
+    def samples(self, rows: slice, euler: bool = True, energy: bool = True) -> dict:
         """Output rows as arrays (:func:`gyro_sim.engine.saving.sample_arrays`): t, L, q, omega_b, euler (None
-        unless ``euler``), torque, energy, current, rate, phase, modes, effects. ``rows``: output rows of the whole
-        run (not yet released)."""
+        unless ``euler``), torque, energy (None unless ``energy``), current, rate, phase, modes, effects. ``rows``:
+        output rows of the whole run (not yet released)."""
         t_rows, rows = self.t_out[rows], self._buf(rows)
         return sample_arrays(self.scene, self.sim.terms, self.sim.attitude, t_rows, self.out_y[rows],
-                             self.out_N[rows], self.cur[rows], self.rate[rows], self.phase[rows], euler=euler)
+                             self.out_N[rows], self.cur[rows], self.rate[rows], self.phase[rows], euler=euler,
+                             energy=energy)
 
     def result(self) -> RunResult:
         """The whole run as a :class:`RunResult` (:func:`gyro_sim.engine.saving.run_result`; refused once rows were

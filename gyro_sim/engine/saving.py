@@ -32,29 +32,34 @@ def output_times(scene: Scene, T: float, period: Optional[float] = None) -> tupl
 
 
 def sample_arrays(scene: Scene, terms, attitude: bool, t_rows: np.ndarray, Y: np.ndarray, N: np.ndarray,
-                  cur: np.ndarray, rate: np.ndarray, phase: np.ndarray, euler: bool = True) -> dict:
-    """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy, current, rate, phase,
-    modes, effects (without attitude: q and euler NaN, omega_b in the case frame). ``t_rows`` (s), ``Y`` (the
-    states), ``N`` (N m, the torques), ``cur``, ``rate``, ``phase`` (A, rad/s, rad: the stators' columns): the rows;
-    ``terms``: the run's model (:class:`gyro_sim.engine.terms.Terms`)."""
+                  cur: np.ndarray, rate: np.ndarray, phase: np.ndarray, euler: bool = True,
+                  energy: bool = True) -> dict:
+    """Output rows as arrays: t, L, q, omega_b, euler (None unless ``euler``), torque, energy (None unless
+    ``energy``), current, rate, phase, modes, effects (without attitude: q and euler NaN, omega_b in the case frame).
+    ``t_rows`` (s), ``Y`` (the states), ``N`` (N m, the torques), ``cur``, ``rate``, ``phase`` (A, rad/s, rad: the
+    stators' columns): the rows; ``terms``: the run's model (:class:`gyro_sim.engine.terms.Terms`)."""
     L, q = Y[:, 0:3], Y[:, 3:7]
     extra = {}
+    E: Optional[np.ndarray] = None
     if not attitude:
         omega_b = terms.body_rates(t_rows, Y)
-        energy = kinetic_energy(terms.J, omega_b)  # isotropic: frame-free
+        if energy:
+            E = kinetic_energy(terms.J, omega_b)  # isotropic: frame-free
     elif terms.eff[effects.ON]:
         t = t_rows
         omega_b = terms.body_rates(t, Y)
         extra = terms.effect_outputs(t, Y)
-        energy = system_energy(scene, omega_b, extra)  # the body's and its internal bodies'
+        if energy:
+            E = system_energy(scene, omega_b, extra)  # the body's and its internal bodies'
     else:
         _, omega_b = body_rates(terms.J, L, q)
-        energy = kinetic_energy(terms.J, omega_b)
+        if energy:
+            E = kinetic_energy(terms.J, omega_b)
     eul = None
     if euler:
         eul = euler_angles(quat_to_matrix(q), L) if attitude else np.full((L.shape[0], 3), np.nan)
     return {"t": t_rows, "L": L, "q": q, "omega_b": omega_b, "euler": eul, "torque": N,
-            "energy": energy, "current": cur, "rate": rate, "phase": phase,
+            "energy": E, "current": cur, "rate": rate, "phase": phase,
             "modes": Y[:, 7:7 + 3 * terms.tau.size], "effects": extra}
 
 

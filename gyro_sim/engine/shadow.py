@@ -93,13 +93,13 @@ class ErrorEstimator:
                 self.sync_shadow(change=True)  # (the shadow reaches the change before it takes it)
             self.shadow.set_stators(by_index)
 
-    def accumulate(self, sel: np.ndarray, Ln: np.ndarray, N_rows: np.ndarray, L_rows: np.ndarray) -> None:
+    def accumulate(self, sel: np.ndarray, Ln: "np.ndarray | list", N_rows: np.ndarray, L_rows: np.ndarray) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt (the modes' error bound, :meth:`error_estimate`) and the phase turned
-        over new sound output samples: their times ``sel`` (s), |L| ``Ln`` (N m s), torques ``N_rows`` (N m) and
-        kinetic moments ``L_rows`` (N m s, inertial frame)."""
+        over new sound output samples: their times ``sel`` (s), |L| ``Ln`` (N m s; an array or a list), torques
+        ``N_rows`` (N m) and kinetic moments ``L_rows`` (N m s, inertial frame)."""
         # (sequential sums in time order, sample by sample: the same bits whether samples are breaks or not; scalar
         # code, a few samples a call)
-        ts, Ls = sel.tolist(), Ln.tolist()
+        ts, Ls = sel.tolist(), (Ln.tolist() if isinstance(Ln, np.ndarray) else Ln)
         self.control.note_L(max(Ls))
         jmax = self.sim.terms.Jinv_max
         prev, turned = self._last_t, self._turned

@@ -19,10 +19,11 @@ from gyro_sim.io.bag_format import (  # noqa: F401 (RESERVE_NAME: re-exported)
     _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, cdr_message, write_chunk_crcs,
 )
 from gyro_sim.io.messages import (
-    QOS, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_SCENE,
-    TOPIC_STATOR_COMMANDS, TOPIC_STATUS, TOPIC_TF_STATIC, TOPICS,
+    QOS, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE,
+    TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS,
     command_message, effects_message, scene_message, stamp_ns, state_messages, status_message, tf_static_message,
 )
+from gyro_sim.io.cdr_template import Template
 from gyro_sim.io.signals import RunInterrupted, _held_signals, _signals_deferred
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -121,6 +122,22 @@ def _nameless_file(folder: Path) -> int:
     return fd
 
 
+#: a header's stamp, as a :class:`~gyro_sim.io.cdr_template.Template` path
+STAMP_PATHS = (("header", "stamp", "sec"), ("header", "stamp", "nanosec"))
+_VECTOR = STAMP_PATHS + tuple(("vector", k) for k in "xyz")
+#: topic -> where the numbers of its per-sample message are (the builders' dicts: gyro_sim.io.messages); the stators'
+#: and the commands' (a JointState's stamp, position, velocity, effort) follow from their lengths (BagRecorder._encode)
+_NUMBER_PATHS: dict[str, tuple] = {
+    TOPIC_CLOCK: (("clock", "sec"), ("clock", "nanosec")),
+    TOPIC_IMU: STAMP_PATHS + tuple(("orientation", k) for k in "xyzw") + tuple(("angular_velocity", k) for k in "xyz"),
+    TOPIC_KINETIC_MOMENT: _VECTOR, TOPIC_EULER: _VECTOR, TOPIC_TORQUE: _VECTOR,
+    TOPIC_TF: tuple(("transforms", j) + p for j in range(2) for p in STAMP_PATHS + tuple(
+        ("transform", "rotation", k) for k in "xyzw")),
+    TOPIC_STATORS: (), TOPIC_STATOR_COMMANDS: (),
+}
+_NO_TEMPLATE = object()
+
+
 class BagRecorder:
     """Writes one rosbag2 bag (MCAP) of a run: a context manager, closable from ``finally``.
 
@@ -191,6 +208,7 @@ class BagRecorder:
         self._span_ns = int(round(float(CHUNK_SPAN if chunk_span is None else chunk_span) * 1e9))
         self._chunk_wall = float(CHUNK_WALL if chunk_wall is None else chunk_wall)
         self._failed: Optional[str] = None
+        self._templates: dict = {}  # shape -> Template (None: serialized whole), :meth:`_encode`
         self._reserve_fd: Optional[int] = None
         self._reserved = 0
         try:
@@ -378,6 +396,31 @@ class BagRecorder:
     def _serialize(self, topic: str, fields: dict) -> memoryview:
         return cdr_message(topic, fields)
 
+    def _encode(self, topic: str, fields: dict):
+        """The bytes of a per-sample or command message: by a :class:`gyro_sim.io.cdr_template.Template` of its shape
+        (made at its first message: the same bytes as :meth:`_serialize`, ~2 µs instead of ~10-25), else
+        :meth:`_serialize`. ``fields``: a builder's dict (:func:`gyro_sim.io.messages.state_messages`,
+        :func:`gyro_sim.io.messages.command_message`), whose strings and constants are its topic's own; a JointState's
+        names and lengths are part of its shape."""
+        paths: Optional[tuple] = _NUMBER_PATHS.get(topic)
+        if paths is None:
+            return self._serialize(topic, fields)
+        key: tuple = (topic,)
+        if topic in (TOPIC_STATORS, TOPIC_STATOR_COMMANDS):
+            lengths = tuple(len(fields[k]) for k in ("position", "velocity", "effort"))
+            key = (topic, tuple(fields["name"]), lengths)
+            paths = STAMP_PATHS + tuple((k, i) for k, n in zip(("position", "velocity", "effort"), lengths, strict=True)
+                                        for i in range(n))
+        tmpl = self._templates.get(key, _NO_TEMPLATE)
+        if tmpl is _NO_TEMPLATE:
+            try:
+                tmpl = Template(topic, fields, paths)
+            except (ValueError, KeyError, TypeError):  # (no fixed place of a number: serialized whole)
+                tmpl = None
+            if len(self._templates) < 64:
+                self._templates[key] = tmpl
+        return self._serialize(topic, fields) if tmpl is None else tmpl.encode_fields(fields)
+
     def _write(self, ns: int, items: Sequence[tuple[str, Any]], t_sample: Optional[float] = None) -> None:
         """Write serialized (topic, data) pairs at log time ns (all or, on a bad argument, none); ``t_sample``:
         the time of the state sample they carry (s), if they do."""
@@ -417,11 +460,11 @@ class BagRecorder:
         if eff is not None:
             msgs[TOPIC_EFFECTS] = eff
         ns = stamp_ns(t)
-        self._write(ns, [(topic, self._serialize(topic, f)) for topic, f in msgs.items()], float(t))
+        self._write(ns, [(topic, self._encode(topic, f)) for topic, f in msgs.items()], float(t))
 
     def write_command(self, t: float, names: Sequence[str], current: Optional[Any], rate: Optional[Any]) -> None:
         """A stator command at time t: currents (A) and/or signed rates (rad/s) of the named stators."""
-        data = self._serialize(TOPIC_STATOR_COMMANDS, command_message(t, names, current, rate))
+        data = self._encode(TOPIC_STATOR_COMMANDS, command_message(t, names, current, rate))
         self._write(stamp_ns(t), [(TOPIC_STATOR_COMMANDS, data)])
 
     def write_diagnostics(self, t: float, fields: Mapping[str, Any]) -> None:

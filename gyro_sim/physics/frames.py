@@ -24,6 +24,9 @@ import numpy as np
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3), body → case, of unit quaternions q (..., 4) = (w, x, y, z)."""
     q = np.asarray(q, dtype=float)
+    if q.size == 4 and q.shape[-1] == 4:  # one quaternion (a tick's sample): scalar code, the same bits (the same
+        # IEEE operations in the same order), ~2 µs instead of ~15
+        return np.array(_matrix(*q.ravel().tolist())).reshape(q.shape[:-1] + (3, 3))
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     R = np.empty(q.shape[:-1] + (3, 3))
     R[..., 0, 0] = 1 - 2 * (y * y + z * z)
@@ -36,6 +39,13 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     R[..., 2, 1] = 2 * (y * z + w * x)
     R[..., 2, 2] = 1 - 2 * (x * x + y * y)
     return R
+
+
+def _matrix(w: float, x: float, y: float, z: float) -> tuple:
+    """:func:`quat_to_matrix` of one quaternion, rows of Python floats (its expressions, term for term)."""
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:

@@ -182,7 +182,8 @@ def _command_problem(msg, stators: list, limits: Optional[tuple] = None) -> str:
             return f"velocity[{name}] = {preview(r)}: field rate must be finite (rad/s)"
     if limits is not None:
         index = {n: k for k, n in enumerate(stators)}
-        max_current, max_rate = ([float(v) for v in x] for x in limits)
+        # (NumPy arrays as lists of floats in one call: iterating them makes NumPy scalars, ~2 µs a command)
+        max_current, max_rate = (x.tolist() if hasattr(x, "tolist") else [float(v) for v in x] for x in limits)
         for name, c in zip(names, msg.effort, strict=True):
             lim = max_current[index[name]]
             if c > lim:

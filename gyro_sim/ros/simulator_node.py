@@ -61,7 +61,7 @@ from gyro_sim.engine.simulate import Runner, controller_period
 from gyro_sim.ros.common import (MessageWait, exit_status, make_executor, message_class, node_main, parse_command,
                                  qos_profile, signal_name, take, wait_for_matches)
 from gyro_sim.ros.launch import CONTROLLER_ENDED_SIGNAL
-from gyro_sim.ros.wire import Wire, command_view, state_templates, take_serialized
+from gyro_sim.ros.wire import CommandReader, Wire, state_bytes, state_templates, take_serialized
 
 MODES = ("lockstep", "realtime", "freerun")
 #: per-sample topics in publishing order: the clock first, the stator state last (a tick's state is complete after it)
@@ -202,6 +202,7 @@ class SimulatorNode(Node):
         # the per-tick messages as CDR bytes (gyro_sim.ros.wire), each type checked now (not in the first tick)
         self.wire = Wire({**self.classes, TOPIC_STATOR_COMMANDS: self.command_sub.msg_type})
         self.commands_serialized = self.wire.serialized(TOPIC_STATOR_COMMANDS)
+        self.command_reader = CommandReader(self.wire)  # (a command of a shape seen before: read by its template)
         for t in topics:
             self.wire.serialized(t)
         self.templates = state_templates(self.wire)  # (their numbers patched into bytes made once)
@@ -286,11 +287,12 @@ class SimulatorNode(Node):
 
     def take_command(self):
         """The next command message of the subscription (past the executor), or None: decoded from its CDR bytes
-        where :attr:`wire` allows (:func:`gyro_sim.ros.wire.command_view`), else rclpy's message."""
+        where :attr:`wire` allows (:class:`gyro_sim.ros.wire.CommandReader`: a shape seen before by its template),
+        else rclpy's message."""
         if not self.commands_serialized:
             return take(self.command_sub)
         raw = take_serialized(self.command_sub)
-        return None if raw is None else command_view(self.wire.decode(TOPIC_STATOR_COMMANDS, raw))
+        return None if raw is None else self.command_reader.read(raw)
 
     def publish_status(self, text: str, warn: bool = False) -> None:
         if warn:  # rclpy ties one severity to each call site
@@ -311,9 +313,16 @@ class SimulatorNode(Node):
     def publish_samples(self, s: dict, names: list) -> None:
         now = time.perf_counter()
         topics = self.subscribed()
+        # the state a controller reads (/clock, gyro/imu, gyro/kinetic_moment) without injected sensor noise: its
+        # numbers straight into the templates' bytes (the same bytes as the builders' dicts give, ~5 µs a state
+        # instead of ~20)
+        direct = (bool(topics) and all(t in self.templates for t in topics)
+                  and not (self.faults is not None and self.fault_config.sensors_active))
         for i in range(s["t"].size):
             ns = stamp_ns(s["t"][i])
-            if topics:
+            if direct and ns < _INT32_NS:
+                self._publish_direct(topics, ns, s["L"][i].tolist(), s["q"][i].tolist(), s["omega_b"][i].tolist())
+            elif topics:
                 L, q, w = s["L"][i], s["q"][i], s["omega_b"][i]
                 cov = None
                 if self.faults is not None and self.fault_config.sensors_active:
@@ -339,6 +348,21 @@ class SimulatorNode(Node):
             for k in sorted(self.published_n)[:-PUBLISHED_KEPT // 10]:
                 del self.published_n[k]
                 self.published_wall.pop(k, None)
+
+
+    def _publish_direct(self, topics: tuple, ns: int, L: list, q: list, w: list) -> None:
+        """Publish a state to ``topics`` (each with a template: :func:`gyro_sim.ros.wire.state_templates`) from its
+        numbers: stamp ``ns`` (ns, within int32 seconds), L (N m s), q (w, x, y, z), Ω_b (rad/s) as Python floats, in
+        the order of the templates' paths (:func:`gyro_sim.io.messages.state_messages` puts the same numbers in its
+        dicts)."""
+        out = [(self.pubs[t], m) for t, m in zip(topics, state_bytes(self.templates, topics, ns, L, q, w),
+                                                   strict=True)]  # (encoded first, then sent back to back)
+        for pub, m in out:
+            pub.publish(m)
+
+
+#: stamps (ns) from here on are beyond builtin_interfaces/Time's int32 seconds (the builders refuse them, saying so)
+_INT32_NS = (2**31) * 1_000_000_000
 
 
 def last_sample(s: dict) -> dict:
@@ -592,7 +616,7 @@ class Loop:
                     self.diagnostics()
                 if now >= resend:
                     if self.last_published:
-                        self.node.publish_samples(self.last_published["s"], self.names)
+                        self.node.publish_samples(last_sample(self.last_published["s"]), self.names)
                     resend = now + 0.5
                 self.waiter.wait()  # (woken at least every WAKE_PERIOD: signals, liveness, services)
             return None
@@ -727,10 +751,14 @@ class Loop:
         if rows.stop <= rows.start:  # a break that is no sample (a command's instant, an error-control check)
             return
         # (the Euler angles only where someone reads them: a third of the samples' cost)
-        s = self.runner.samples(rows, euler=self.recorder is not None or TOPIC_EULER in self.node.subscribed())
+        # (no energy: no topic carries it)
+        s = self.runner.samples(rows, euler=self.recorder is not None or TOPIC_EULER in self.node.subscribed(),
+                                energy=False)
         self.node.publish_samples(s, self.names)
         if s["t"].size:
-            self.last_published["s"] = last_sample(s)
+            # (its last row is taken where it is published again, while waiting for a command: the rows are still
+            # in the runner's buffer then, as a slice of them would be)
+            self.last_published["s"] = s
         if self.recorder is not None:
             for i in range(s["t"].size):
                 self.recorder.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],

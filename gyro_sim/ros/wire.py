@@ -12,14 +12,15 @@ rclpy would send (the same CDR bytes but for alignment padding, which Fast CDR l
 """
 from __future__ import annotations
 
-import struct
 from types import SimpleNamespace
 from typing import Any, Optional
 
 from gyro_sim.io.bag_format import _typestore, cdr_message
-from gyro_sim.io.messages import TOPIC_STATOR_COMMANDS, TOPICS, command_message, to_ros
+from gyro_sim.io.cdr_template import Template
+from gyro_sim.io.messages import (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS,
+                                  command_message, to_ros)
 
-__all__ = ["Wire", "Template", "take_serialized", "command_view"]
+__all__ = ["Wire", "Template", "CommandReader", "take_serialized", "command_view", "state_bytes"]
 
 
 def take_serialized(sub) -> Optional[bytes]:
@@ -107,101 +108,6 @@ class Wire:
             return deserialize_message(raw, self.classes[topic])
 
 
-_STRUCT = {"int8": "b", "uint8": "B", "int16": "h", "uint16": "H", "int32": "i", "uint32": "I", "int64": "q",
-           "uint64": "Q", "float32": "f", "float64": "d"}
-
-
-def _leaf_base(msgtype: str, path: tuple) -> str:
-    """The base type ('float64', 'int32', ...) of the number at ``path`` (field names, and an index into an array
-    or sequence) of ``msgtype``, from the typestore's definitions."""
-    from rosbags.interfaces import Nodetype
-
-    fields = dict(_typestore().fielddefs[msgtype][1])
-    node = fields[path[0]]
-    for key in path[1:]:
-        if node[0] == Nodetype.NAME:
-            node = dict(_typestore().fielddefs[node[1]][1])[key]
-        else:  # (an array or sequence: key is an index)
-            node = node[1][0]
-    if node[0] == Nodetype.NAME:
-        raise ValueError(f"{msgtype}: {'.'.join(map(str, path))} is a message, not a number")
-    if node[0] != Nodetype.BASE or node[1][0] not in _STRUCT:
-        raise ValueError(f"{msgtype}: {'.'.join(map(str, path))} is no number")
-    return node[1][0]
-
-
-def _with(fields: Any, path: tuple, value) -> Any:
-    """A copy of the nested ``fields`` (dicts and lists) with the leaf at ``path`` set to ``value``."""
-    if not path:
-        return value
-    out = dict(fields) if isinstance(fields, dict) else list(fields)
-    out[path[0]] = _with(fields[path[0]], path[1:], value)
-    return out
-
-
-def _get(fields: Any, path: tuple):
-    for key in path:
-        fields = fields[key]
-    return fields
-
-
-class Template:
-    """The CDR bytes of messages of one shape that differ only in some numbers (a header stamp, a vector, ...):
-    one message serialized by rosbags (:func:`gyro_sim.io.bag_format.cdr_message`) with those numbers patched in
-    place, ~0.5 µs against ~10 µs for the whole serialization (and ~30 µs for rclpy's).
-
-    ``fields``: a builder's dict of ``topic``, whose strings, sequence lengths and other numbers every message of
-    the template shares; ``paths``: where the varying numbers are (tuples of field names and indices), in the order
-    :meth:`encode` takes them and :meth:`decode` gives them. Each number's place in the bytes is found by
-    serializing ``fields`` with it set to two values that differ in every byte (so nothing about CDR's layout is
-    written here); :meth:`encode` of the numbers of ``fields`` gives rosbags' bytes of ``fields`` (checked)."""
-
-    def __init__(self, topic: str, fields: dict, paths):
-        self.topic, self.paths = topic, tuple(tuple(p) for p in paths)
-        msgtype = TOPICS[topic]
-        self.base = bytes(cdr_message(topic, fields))
-        self._ops = []  # (struct format, offset) per path
-        for path in self.paths:
-            fmt = "<" + _STRUCT[_leaf_base(msgtype, path)]
-            size = struct.calcsize(fmt)
-            a, b = (struct.unpack(fmt, bytes([m]) * size)[0] for m in (0x11, 0x22))
-            ra = bytes(cdr_message(topic, _with(fields, path, a)))
-            rb = bytes(cdr_message(topic, _with(fields, path, b)))
-            diff = [i for i in range(len(ra)) if ra[i] != rb[i]]
-            if len(ra) != len(self.base) or len(diff) != size or diff[-1] - diff[0] != size - 1:
-                raise ValueError(f"{topic}: {'.'.join(map(str, path))} has no fixed place in the message bytes")
-            self._ops.append((fmt, diff[0]))
-        spans = sorted((off, off + struct.calcsize(fmt)) for fmt, off in self._ops)
-        # the bytes a message must share with the template for decode to read its numbers (all but the numbers)
-        cuts = [0] + [x for span in spans for x in span] + [len(self.base)]
-        self._same = [(cuts[i], cuts[i + 1]) for i in range(0, len(cuts), 2) if cuts[i] < cuts[i + 1]]
-        if self.encode(*(_get(fields, p) for p in self.paths)) != self.base:
-            raise ValueError(f"{topic}: the template does not reproduce its message")
-
-    def encode(self, *values) -> bytes:
-        """The message's bytes with the numbers ``values`` (one per path)."""
-        out = bytearray(self.base)
-        for (fmt, off), v in zip(self._ops, values, strict=True):
-            struct.pack_into(fmt, out, off, v)
-        return bytes(out)
-
-    def decode(self, raw: bytes) -> Optional[list]:
-        """The numbers (one per path) of a message of this shape, or None for a message of another shape (another
-        frame id, sequence length, constant, or alignment padding that is not zero: decode it whole instead)."""
-        if len(raw) != len(self.base):
-            return None
-        base = self.base
-        for a, b in self._same:
-            if raw[a:b] != base[a:b]:
-                return None
-        return [struct.unpack_from(fmt, raw, off)[0] for fmt, off in self._ops]
-
-    def encode_fields(self, fields: dict) -> bytes:
-        """:meth:`encode` of the numbers of a builder's dict of the template's shape (its other fields are not
-        read: the caller knows they are the template's)."""
-        return self.encode(*(_get(fields, p) for p in self.paths))
-
-
 #: where a header's stamp is, as a :class:`Template` path
 STAMP_PATHS = (("header", "stamp", "sec"), ("header", "stamp", "nanosec"))
 
@@ -211,7 +117,7 @@ def state_templates(wire: "Wire") -> dict:
     angular velocity x y z; /gyro/kinetic_moment: stamp, L x y z) and /clock (stamp), as the simulator sends them
     without injected sensor noise (:func:`gyro_sim.io.messages.state_messages`), for the types ``wire`` may send as
     bytes."""
-    from gyro_sim.io.messages import TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, state_messages
+    from gyro_sim.io.messages import state_messages
 
     paths = {TOPIC_IMU: STAMP_PATHS + tuple(("orientation", k) for k in "xyzw")
              + tuple(("angular_velocity", k) for k in "xyz"),
@@ -220,3 +126,75 @@ def state_templates(wire: "Wire") -> dict:
     msgs = state_messages(0.0, [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3, [0.0] * 3, [], [], [], [],
                           only=list(paths))
     return {t: Template(t, msgs[t], p) for t, p in paths.items() if t in wire.classes and wire.serialized(t)}
+
+
+def state_bytes(templates: dict, topics, ns: int, L, q, w) -> list:
+    """The bytes of a state's messages on ``topics`` (each one of :func:`state_templates`: /clock, /gyro/imu,
+    /gyro/kinetic_moment) straight from its numbers, without the builders' dicts: stamp ``ns`` (ns, within int32
+    seconds), L (N m s), q (w, x, y, z), Ω_b (rad/s), each three or four Python floats. The same bytes as
+    ``templates[topic].encode_fields`` of :func:`gyro_sim.io.messages.state_messages` of them (~5 µs a state
+    instead of ~20)."""
+    sec, nsec = divmod(ns, 1_000_000_000)
+    values = {TOPIC_CLOCK: (sec, nsec), TOPIC_IMU: (sec, nsec, q[1], q[2], q[3], q[0], w[0], w[1], w[2]),
+              TOPIC_KINETIC_MOMENT: (sec, nsec, L[0], L[1], L[2])}
+    return [templates[t].encode(*values[t]) for t in topics]
+
+
+class CommandReader:
+    """The commands (sensor_msgs/JointState CDR bytes) a simulator takes, read as :func:`command_view` reads them:
+    a message of the shape of one read before (the same names, frame id, positions, numbers of currents and rates,
+    and alignment padding: every byte but the stamp's and the values') by a :class:`Template` of that shape, ~3 µs;
+    any other by ``wire`` (:meth:`Wire.decode`, ~12 µs), whose shape is then learnt (at most :data:`SHAPES` shapes,
+    and no more after :data:`SHAPES` messages whose bytes a template of their shape did not read back: e.g. padding
+    that another serializer leaves unwritten). The view is the same either way: the stamp's integers, the names as
+    texts, the values as Python floats."""
+
+    #: shapes kept, and messages whose shape could not be learnt before learning stops
+    SHAPES = 16
+
+    def __init__(self, wire: Wire):
+        self.wire = wire
+        self._shapes: list = []  # (Template, header frame_id, names, currents, rates), the last read first
+        self._misses = 0
+
+    def read(self, raw: bytes) -> SimpleNamespace:
+        """The view of a command's CDR bytes (:func:`command_view`)."""
+        for i, shape in enumerate(self._shapes):
+            numbers = shape[0].decode(raw)
+            if numbers is not None:
+                if i:
+                    self._shapes.insert(0, self._shapes.pop(i))
+                return _command_numbers(shape, numbers)
+        msg = self.wire.decode(TOPIC_STATOR_COMMANDS, raw)
+        view = command_view(msg)
+        if len(self._shapes) < self.SHAPES and self._misses < self.SHAPES:
+            self._learn(msg, view, raw)
+        return view
+
+    def _learn(self, msg, view: SimpleNamespace, raw: bytes) -> None:
+        n_cur, n_rate = len(view.effort), len(view.velocity)
+        try:
+            if not all(isinstance(x, str) for x in view.name):
+                raise ValueError("a name is no text")
+            fields = {"header": {"stamp": {"sec": msg.header.stamp.sec, "nanosec": msg.header.stamp.nanosec},
+                                 "frame_id": msg.header.frame_id},
+                      "name": list(view.name), "position": msg.position.tolist(), "effort": list(view.effort),
+                      "velocity": list(view.velocity)}
+            tmpl = Template(TOPIC_STATOR_COMMANDS, fields, STAMP_PATHS + tuple(("effort", i) for i in range(n_cur))
+                            + tuple(("velocity", i) for i in range(n_rate)))
+            ok = tmpl.decode(raw) is not None  # (its bytes are these: the next of the shape is read by it)
+        except Exception:  # noqa: BLE001 - a shape a template cannot hold (e.g. NaN values of a refused command)
+            ok = False
+        if not ok:
+            self._misses += 1
+            return
+        self._shapes.insert(0, (tmpl, msg.header.frame_id, tuple(view.name), n_cur, n_rate))
+
+
+def _command_numbers(shape: tuple, numbers: list) -> SimpleNamespace:
+    """:func:`command_view` of a command read by a template: ``shape`` (Template, frame_id, names, number of currents,
+    of rates), ``numbers`` (stamp sec, nanosec, the currents, the rates)."""
+    _, frame_id, names, n_cur, n_rate = shape
+    stamp = SimpleNamespace(sec=numbers[0], nanosec=numbers[1])
+    return SimpleNamespace(header=SimpleNamespace(stamp=stamp, frame_id=frame_id), name=list(names),
+                           effort=numbers[2:2 + n_cur], velocity=numbers[2 + n_cur:2 + n_cur + n_rate])

@@ -227,20 +227,21 @@ def command_problem(sim, k: int, current: Optional[float], rate: Optional[float]
     ``current`` A / ``rate`` rad/s (None: unchanged) is allowed, else the one-line reason naming the stator, the
     value and the limit (the in-process :meth:`Simulator.set_stators` and the simulator node's commands say the
     same)."""
-    if ((current is None or (math.isfinite(real_value(current)) and 0 <= current <= sim.max_current[k]))
-            and (rate is None or (math.isfinite(real_value(rate)) and abs(rate) <= sim.max_rate[k]))):
-        return ""  # (allowed: no name to preview, at every command of a run)
-    name = preview(sim.stator_names[k], 40)
     if current is not None:
         if not (math.isfinite(real_value(current)) and current >= 0):
-            return f"stator {name}: current = {preview(current)}: must be finite and ≥ 0 A"
+            return f"stator {_name(sim, k)}: current = {preview(current)}: must be finite and ≥ 0 A"
         if current > sim.max_current[k]:
-            return (f"stator {name}: current = {_g(current)} A: beyond its largest current {_g(sim.max_current[k])} A "
-                    f"(stators.{k}.max_current)")
+            return (f"stator {_name(sim, k)}: current = {_g(current)} A: beyond its largest current "
+                    f"{_g(sim.max_current[k])} A (stators.{k}.max_current)")
     if rate is not None:
         if not math.isfinite(real_value(rate)):
-            return f"stator {name}: rate = {preview(rate)}: must be finite (rad/s)"
+            return f"stator {_name(sim, k)}: rate = {preview(rate)}: must be finite (rad/s)"
         if abs(rate) > sim.max_rate[k]:
-            return (f"stator {name}: rate = {_g(rate)} rad/s: beyond its largest field rate "
+            return (f"stator {_name(sim, k)}: rate = {_g(rate)} rad/s: beyond its largest field rate "
                     f"{_g(sim.max_rate[k])} rad/s (stators.{k}.max_rate)")
     return ""
+
+
+def _name(sim, k: int) -> str:
+    """Stator ``k``'s name as a refusal quotes it (made only for a refusal: a command a tick passes)."""
+    return preview(sim.stator_names[k], 40)
