@@ -42,9 +42,10 @@ def spinup_text() -> str:
     return SPINUP.read_text()
 
 
-def bounded(msg: str) -> None:
-    """A SceneError's message: at most MAX_LINES lines of at most MAX_LINE_CHARS characters."""
-    lines = msg.split("\n")
+def bounded(msg: str, path=None) -> None:
+    """A SceneError's message: at most MAX_LINES lines of at most MAX_LINE_CHARS characters, the scene file's
+    ``path`` counted as "<file>" (its length is the caller's: pytest's temporary folders are longer under xdist)."""
+    lines = (msg if path is None else msg.replace(str(path), "<file>")).split("\n")
     assert len(lines) <= MAX_LINES and max(map(len, lines)) <= MAX_LINE_CHARS, \
         f"{len(lines)} lines, longest {max(map(len, lines))} characters: {msg[:500]!r}"
 
@@ -55,7 +56,7 @@ def refused(path, *fragments) -> str:
         load_scene(path)
     msg = str(ei.value)
     print(f"\n  {msg}")
-    bounded(msg)
+    bounded(msg, path)
     for f in fragments:
         assert f in msg, f"{f!r} not in {msg!r}"
     return msg

@@ -382,6 +382,8 @@ PIP_KEYS = {
     "pandas": "python3-pandas", "xarray": None,
     "websockets": "python3-websockets", "foxglove-sdk": None,
     "ruff": None, "mypy": "python3-mypy",
+    # (.ci/run's workers; `colcon test` runs the suite in one process, without it)
+    "pytest-xdist": None,
 }
 #: ros-* wheels that are not dependencies of the package: the middleware is the user's choice
 #: (RMW_IMPLEMENTATION; rclpy depends on rmw_implementation), the wheels need one installed
