@@ -464,29 +464,40 @@ class ErrorControl:
         self.dLn = dLn / den
         return dL / den, dq / den, dp / den
 
-    def _diff(self, main, shadow) -> tuple[float, float, float, float]:
-        """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase)."""
-        L, Ls = main.y[0:3], shadow.y[0:3]
-        dLn = abs(norm3(L) - norm3(Ls))
+    def _diff(self, main, shadow, L_norm: Optional[float] = None) -> tuple[float, float, float, float]:
+        """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase);
+        ``L_norm``: |L| of the run, if known (norm3 of it: the same bits)."""
+        y, ys = main.y, shadow.y
+        L, Ls = y[0:3], ys[0:3]
+        dLn = abs((norm3(L) if L_norm is None else L_norm) - norm3(Ls))
         dq = dp = 0.0
         if self.attitude:
-            d, p = attitude_split_one(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
-            dq, dp = float(d), float(p)
+            dq, dp = attitude_split_one(y[3:7], ys[3:7], self.axis, L, Ls)
         return dLn, norm3(L - Ls), dq, dp
 
     def measure(self, main, shadow) -> tuple[float, float, float, float, float, float]:
         """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
-        self.L_max = max(self.L_max, norm3(main.y[0:3]))
-        raw = self._diff(main, shadow)
-        dL, dq, dp = self._now(main, shadow, raw=raw)
-        self.dL = max(self.dL, self.banked[0] + dL)
-        self.e_q = max(self.e_q, self.banked[1] + dq)
-        self.e_p = max(self.e_p, self.banked[2] + dp)
-        dLn = self.dLn
+        # (:meth:`_now` at the step control's denominator and at the estimate's, written out: one |L|, one _diff)
+        nL = norm3(main.y[0:3])
+        self.L_max = max(self.L_max, nL)
+        rLn, rL, rq, rp = self._diff(main, shadow, nL)
+        den = self._denom(False)
+        if math.isfinite(den):
+            dLn, dL, dq, dp = rLn / den, rL / den, rq / den, rp / den
+        else:
+            dLn, dL, dq, dp = 0.0, 0.0, 0.0, 0.0
+        b = self.banked
+        self.dL = max(self.dL, b[0] + dL)
+        self.e_q = max(self.e_q, b[1] + dq)
+        self.e_p = max(self.e_p, b[2] + dp)
         # the estimate's (denom_estimate): the same differences
-        now = self._now(main, shadow, self.denom_estimate, raw)
-        self.est = (max(self.est[0], self.banked_est[0] + now[0]), max(self.est[1], self.banked_est[1] + now[1]),
-                    max(self.est[2], self.banked_est[2] + now[2]))
+        den = self._denom(True)
+        if math.isfinite(den):
+            n0, n1, n2 = rL / den, rq / den, rp / den
+        else:
+            n0, n1, n2 = 0.0, 0.0, 0.0
+        est, be = self.est, self.banked_est
+        self.est = (max(est[0], be[0] + n0), max(est[1], be[1] + n1), max(est[2], be[2] + n2))
         self.dLn = dLn
         return dL, dq, dp, self.e_L, self.e_q, self.e_p
 
