@@ -124,6 +124,13 @@ class Terms:
         self.Jinv_max = max(self.Jinv.tolist())  # 1/(kg m²)
         self.field_om_max = max(self.field_om.tolist(), default=0.0)  # the general field's largest ω_p (rad/s)
         self.inv_tau = 1.0 / self.tau  # the modes' rates (1/s; the frozen-flow stepper's argument)
+        # (the step plan's constants of the model, as StepSize.torque_time and frozen_flow.torque_scale take them)
+        self.b_list = self.b.tolist()  # T/A
+        self.w_half = 0.5 * sum(abs(v) for v in self.w.tolist())  # ½Σ|w_n|
+        self.field_B_norm = sum(float(np.linalg.norm(f)) for f in self.field_B) if self.field_B.size else 0.0
+        self.field_om_absmax = max((abs(f) for f in self.field_om.tolist()), default=0.0)  # rad/s
+        self.J_min = min(J.tolist())  # kg m²
+        self.w_abs = np.abs(np.asarray(self.w, float))
 
     def copy(self) -> "Terms":
         """A copy for another simulator of the same run (a shadow): the arrays are shared (read only), but for the
