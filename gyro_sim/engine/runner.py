@@ -217,9 +217,10 @@ class Runner:
                 self.estimator.follow(tb, sel)
         self.wall_time += clock.wall
         self.compile_time += clock.compile
-        self.cur[rows] = c0
-        self.rate[rows] = r0
-        self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
+        if sel.size:  # (a break without samples writes no rows)
+            self.cur[rows] = c0
+            self.rate[rows] = r0
+            self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
         if self.failure is not None:
             return slice(out.start, self.row)  # (the samples before the failure)
         self.apply_scene_commands()

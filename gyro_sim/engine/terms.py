@@ -183,11 +183,11 @@ class Terms:
         if not self.field_om.size:
             # the stators alone: the expressions below element by element in Python floats (the same bits; the
             # cosines and sines NumPy's, of the same array), ~5 µs instead of ~9
-            idx = np.flatnonzero(on).tolist()
             pon = phase[on]
             cs, ss = np.cos(pon).tolist(), np.sin(pon).tolist()
             E1, E2, bl = self._e12
             cl = current.tolist()
+            idx = [i for i, c in enumerate(cl) if c > 0]
             re: list = []
             im: list = []
             for c, s, i in zip(cs, ss, idx):
