@@ -234,9 +234,9 @@ class Runner:
         most |L|²/(2 J_min)), and their |L| (N m s). At the first that does not, the run fails: :attr:`failure` says
         what and when, the output ends with the sample before (:attr:`row`) and :attr:`done` is True."""
         y = self.out_y[r]
-        if self.sim.attitude:  # scalar code for the sound case (the same |L| bits as np.linalg.norm's: x*x + y*y + z*z in
-            # that order); a sum that is not finite (a NaN or inf in the rows, or finite values whose sum overflows)
-            # and a large |L| take the general path below
+        if self.sim.attitude:  # scalar code for the sound case (the same |L| bits as np.linalg.norm's: x*x + y*y + z*z
+            # in that order); a sum that is not finite (a NaN or inf in the rows, or finite values whose sum
+            # overflows) and a large |L| take the general path below
             Ln1 = [math.sqrt(L0 * L0 + L1 * L1 + L2 * L2) for L0, L1, L2 in y[:, 0:3].tolist()]
             if math.isfinite(float(y.sum()) + float(self.out_N[r].sum())) and not max(Ln1) > self.L_sound:
                 return sel.size, Ln1

@@ -27,7 +27,8 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.engine.model import AVERAGED_ERROR
 from gyro_sim.physics.frames import norm3
-from gyro_sim.scenes.accuracy import FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl, ErrorEstimate
+from gyro_sim.scenes.accuracy import (FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
+                                      ErrorEstimate)
 from gyro_sim.scenes.scene import Scene
 from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
 

@@ -240,7 +240,8 @@ class StepSize:
             w, x, yq, z = y[3:7].tolist()
             e_a = np.array(_column(w, x, yq, z, ax))
         Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
-        if om.size and y.dtype == np.float64 and om.dtype == np.float64:  # (torque_scale's arguments as it makes them: the compiled part at once)
+        if om.size and y.dtype == np.float64 and om.dtype == np.float64:
+            # (torque_scale's arguments as it makes them, its compiled part called at once: the same bits)
             return frozen_flow._torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a if e_a is not None else _ZERO3,
                                              e_a is not None, float(terms.c_m), terms.w_abs, terms.tau,
                                              float(terms.tail))

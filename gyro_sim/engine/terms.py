@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import Optional
 
 import numpy as np
 
@@ -190,10 +189,10 @@ class Terms:
             idx = [i for i, c in enumerate(cl) if c > 0]
             re: list = []
             im: list = []
-            for c, s, i in zip(cs, ss, idx):
-                a, e1, e2 = bl[i] * cl[i], E1[i], E2[i]
-                re += (a * (e1[0] * c + e2[0] * s), a * (e1[1] * c + e2[1] * s), a * (e1[2] * c + e2[2] * s))
-                im += (a * (-e1[0] * s + e2[0] * c), a * (-e1[1] * s + e2[1] * c), a * (-e1[2] * s + e2[2] * c))
+            for c, s, i in zip(cs, ss, idx, strict=True):
+                a, u, v = bl[i] * cl[i], E1[i], E2[i]  # (b I, e1, e2)
+                re += (a * (u[0] * c + v[0] * s), a * (u[1] * c + v[1] * s), a * (u[2] * c + v[2] * s))
+                im += (a * (-u[0] * s + v[0] * c), a * (-u[1] * s + v[1] * c), a * (-u[2] * s + v[2] * c))
             n = len(idx)
             return np.array(re, dtype=float).reshape(n, 3), np.array(im, dtype=float).reshape(n, 3), rate[on]
         c, s = np.cos(phase[on]), np.sin(phase[on])
