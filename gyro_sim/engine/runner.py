@@ -109,6 +109,7 @@ class Runner:
         self._bi = 0  # index of the next break to reach
         self._ci = 0
         self.wall_time = 0.0  # s in advance(), numba compile time left out (compile_time)
+        self._clock = CompileClock()
         self.compile_time = 0.0
         # the run fails loudly where its state breaks (_check_samples): "failed: <what> at t = … s", else None
         self.failure: Optional[str] = None
@@ -203,20 +204,22 @@ class Runner:
             self._bi += 1
         t_out, row = self.t_out, self.row
         # the samples up to the break and within round-off past it (t_out is sorted)
-        sel = t_out[row:max(row, int(np.searchsorted(t_out, tb + 1e-12 * max(1.0, tb), side="right")))]
+        sel = t_out[row:max(row, int(t_out.searchsorted(tb + 1e-12 * max(1.0, tb), side="right")))]
         sim = self.sim
         t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
         out = slice(row, row + sel.size)
         rows = self._buf(out)
         if rows.stop > self.out_y.shape[0]:
             raise RuntimeError(f"output buffer of {self.out_y.shape[0]} rows is full: release() the rows taken")
-        with CompileClock() as clock:
+        clock = self._clock  # (one clock for the run's advances: their wall and compile times, summed)
+        w0, c0_ = clock.wall, clock.compile
+        with clock:
             self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
             self._accumulate(sel, rows)
             if self.estimator.shadow is not None and self.failure is None:
                 self.estimator.follow(tb, sel)
-        self.wall_time += clock.wall
-        self.compile_time += clock.compile
+        self.wall_time += clock.wall - w0
+        self.compile_time += clock.compile - c0_
         if sel.size:  # (a break without samples writes no rows)
             self.cur[rows] = c0
             self.rate[rows] = r0

@@ -225,7 +225,10 @@ def attitude_split_one(q1, q2, axis: int, L1, L2) -> tuple[float, float]:
 
 def _floats(v) -> list:
     """The Python floats of a short vector: one tolist() of a float64 array, else float() of each element."""
-    if type(v) is np.ndarray and v.dtype == np.float64:
+    t = type(v)
+    if t is list and all(type(x) is float for x in v):
+        return v
+    if t is np.ndarray and v.dtype == np.float64:
         return v.tolist()
     return [float(x) for x in v]
 
