@@ -125,9 +125,9 @@ class Runner:
     @property
     def is_control_tick(self) -> bool:
         """Whether the present time is a controller tick (commands are due before advancing)."""
-        t = self.sim.t
-        i = int(np.searchsorted(self._ticks, t))
-        return i < self._ticks.size and self._ticks[i] == t
+        t, ticks = self.sim.t, self._ticks
+        i = int(ticks.searchsorted(t))
+        return i < ticks.size and ticks[i] == t
 
     def _buf(self, rows: slice) -> slice:
         """Buffer rows of output rows ``rows`` (of the whole run); refused if :meth:`release` dropped them."""
@@ -169,8 +169,7 @@ class Runner:
 
     def control_input(self):
         """The state a control law sees now (gyro_ctl.laws.ControlInput)."""
-        from gyro_ctl.laws import ControlInput
-
+        ControlInput = _control_input()
         sim = self.sim
         L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
         if sim.terms.eff[effects.ON] or not sim.attitude:
@@ -355,3 +354,13 @@ class Runner:
                           None if self.failure is not None else self.error_estimate(), self.failure)
 
 
+def _control_input():
+    """gyro_ctl.laws.ControlInput (imported on first use: a run without a law does not import gyro_ctl)."""
+    if not _CI:
+        from gyro_ctl.laws import ControlInput
+
+        _CI.append(ControlInput)
+    return _CI[0]
+
+
+_CI: list = []

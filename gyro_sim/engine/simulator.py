@@ -239,6 +239,11 @@ class Simulator:
             why = command_problem(self.terms, k, current, rate)  # (its stator_names, max_current, max_rate)
             if why:
                 raise ValueError(why)
+        self._set_checked(commands)
+
+    def _set_checked(self, commands: dict) -> None:
+        """:meth:`set_stators` of commands ``{stator index: (current A | None, rate rad/s | None)}`` already checked
+        (a shadow run takes its leader's, which its leader's set_stators passed: the same limits)."""
         changed = {k: c for k, (c, _) in commands.items() if c is not None and c != self.current[k]}
         if changed:
             before = self.field_now()
