@@ -195,6 +195,13 @@ class Terms:
                 im += (a * (-u[0] * s + v[0] * c), a * (-u[1] * s + v[1] * c), a * (-u[2] * s + v[2] * c))
             n = len(idx)
             return np.array(re, dtype=float).reshape(n, 3), np.array(im, dtype=float).reshape(n, 3), rate[on]
+        return self._phasors_array(t, current, rate, phase)
+
+    def _phasors_array(self, t: float, current: np.ndarray, rate: np.ndarray,
+                       phase: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_phasors` in NumPy arrays (the general field's terms too; test/test_same_bits.py: the stators' alone
+        give the Python-float code's bits)."""
+        on = current > 0
         c, s = np.cos(phase[on]), np.sin(phase[on])
         amp = (self.b * current)[on][:, None]
         e1, e2 = self.e1[on], self.e2[on]
