@@ -109,6 +109,7 @@ class Runner:
         self._bi = 0  # index of the next break to reach
         self._ci = 0
         self.wall_time = 0.0  # s in advance(), numba compile time left out (compile_time)
+        self._clock = CompileClock()
         self.compile_time = 0.0
         # the run fails loudly where its state breaks (_check_samples): "failed: <what> at t = … s", else None
         self.failure: Optional[str] = None
@@ -124,9 +125,9 @@ class Runner:
     @property
     def is_control_tick(self) -> bool:
         """Whether the present time is a controller tick (commands are due before advancing)."""
-        t = self.sim.t
-        i = int(np.searchsorted(self._ticks, t))
-        return i < self._ticks.size and self._ticks[i] == t
+        t, ticks = self.sim.t, self._ticks
+        i = int(ticks.searchsorted(t))
+        return i < ticks.size and ticks[i] == t
 
     def _buf(self, rows: slice) -> slice:
         """Buffer rows of output rows ``rows`` (of the whole run); refused if :meth:`release` dropped them."""
@@ -168,8 +169,7 @@ class Runner:
 
     def control_input(self):
         """The state a control law sees now (gyro_ctl.laws.ControlInput)."""
-        from gyro_ctl.laws import ControlInput
-
+        ControlInput = _control_input()
         sim = self.sim
         L, q = sim.y[0:3].copy(), sim.y[3:7].copy()
         if sim.terms.eff[effects.ON] or not sim.attitude:
@@ -203,23 +203,26 @@ class Runner:
             self._bi += 1
         t_out, row = self.t_out, self.row
         # the samples up to the break and within round-off past it (t_out is sorted)
-        sel = t_out[row:max(row, int(np.searchsorted(t_out, tb + 1e-12 * max(1.0, tb), side="right")))]
+        sel = t_out[row:max(row, int(t_out.searchsorted(tb + 1e-12 * max(1.0, tb), side="right")))]
         sim = self.sim
         t_seg, ph0, r0, c0 = sim.t, sim.phase.copy(), sim.rate.copy(), sim.current.copy()
         out = slice(row, row + sel.size)
         rows = self._buf(out)
         if rows.stop > self.out_y.shape[0]:
             raise RuntimeError(f"output buffer of {self.out_y.shape[0]} rows is full: release() the rows taken")
-        with CompileClock() as clock:
+        clock = self._clock  # (one clock for the run's advances: their wall and compile times, summed)
+        w0, c0_ = clock.wall, clock.compile
+        with clock:
             self.row = sim.advance(tb, sel, self.out_y, self.out_N, rows.start) + self._base
             self._accumulate(sel, rows)
             if self.estimator.shadow is not None and self.failure is None:
                 self.estimator.follow(tb, sel)
-        self.wall_time += clock.wall
-        self.compile_time += clock.compile
-        self.cur[rows] = c0
-        self.rate[rows] = r0
-        self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
+        self.wall_time += clock.wall - w0
+        self.compile_time += clock.compile - c0_
+        if sel.size:  # (a break without samples writes no rows)
+            self.cur[rows] = c0
+            self.rate[rows] = r0
+            self.phase[rows] = np.mod(ph0 + r0 * (sel[:, None] - t_seg), 2 * math.pi)
         if self.failure is not None:
             return slice(out.start, self.row)  # (the samples before the failure)
         self.apply_scene_commands()
@@ -233,13 +236,12 @@ class Runner:
         most |L|²/(2 J_min)), and their |L| (N m s). At the first that does not, the run fails: :attr:`failure` says
         what and when, the output ends with the sample before (:attr:`row`) and :attr:`done` is True."""
         y = self.out_y[r]
-        if sel.size == 1 and self.sim.attitude:  # one sample (a tick's): scalar code for the sound case (the same |L|
-            # bits as np.linalg.norm's: x*x + y*y + z*z in that order); a sum that is not finite (a NaN or inf in the
-            # row, or finite values whose sum overflows) and a large |L| take the general path below
-            L0, L1, L2 = y[0, 0:3].tolist()
-            Ln1 = math.sqrt(L0 * L0 + L1 * L1 + L2 * L2)
-            if math.isfinite(float(y.sum()) + float(self.out_N[r].sum())) and not Ln1 > self.L_sound:
-                return 1, [Ln1]
+        if self.sim.attitude:  # scalar code for the sound case (the same |L| bits as np.linalg.norm's: x*x + y*y + z*z
+            # in that order); a sum that is not finite (a NaN or inf in the rows, or finite values whose sum
+            # overflows) and a large |L| take the general path below
+            Ln1 = [math.sqrt(L0 * L0 + L1 * L1 + L2 * L2) for L0, L1, L2 in y[:, 0:3].tolist()]
+            if math.isfinite(float(y.sum()) + float(self.out_N[r].sum())) and not max(Ln1) > self.L_sound:
+                return sel.size, Ln1
         if self.sim.attitude:  # (every column of y: L, q, the modes and effects' states)
             ok = np.isfinite(y).all(axis=1) & np.isfinite(self.out_N[r]).all(axis=1)
         else:
@@ -352,3 +354,13 @@ class Runner:
                           None if self.failure is not None else self.error_estimate(), self.failure)
 
 
+def _control_input():
+    """gyro_ctl.laws.ControlInput (imported on first use: a run without a law does not import gyro_ctl)."""
+    if not _CI:
+        from gyro_ctl.laws import ControlInput
+
+        _CI.append(ControlInput)
+    return _CI[0]
+
+
+_CI: list = []

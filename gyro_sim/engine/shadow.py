@@ -87,12 +87,13 @@ class ErrorEstimator:
             self.shadow.lead_gap = float(np.max(np.diff(stops))) if stops.size > 1 else math.inf
 
     def set_stators(self, by_index: dict) -> None:
-        """The run's commands ``{stator index: (current A | None, rate rad/s | None)}``, applied now, for the shadow
-        too (which first reaches the present time where they change what a stator does)."""
+        """The run's commands ``{stator index: (current A | None, rate rad/s | None)}``, applied now (the run's
+        :meth:`Simulator.set_stators` has passed them), for the shadow too (which first reaches the present time where
+        they change what a stator does)."""
         if self.shadow is not None:
             if self._lazy and _changes(self.shadow, by_index):
                 self.sync_shadow(change=True)  # (the shadow reaches the change before it takes it)
-            self.shadow.set_stators(by_index)
+            self.shadow._set_checked(by_index)  # (checked by the run's set_stators: the same limits)
 
     def accumulate(self, sel: np.ndarray, Ln: "np.ndarray | list", N_rows: np.ndarray, L_rows: np.ndarray) -> None:
         """∫|N| dt and ∫ | |Ω| − |Ω0| | dt (the modes' error bound, :meth:`error_estimate`) and the phase turned

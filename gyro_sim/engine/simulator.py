@@ -239,6 +239,11 @@ class Simulator:
             why = command_problem(self.terms, k, current, rate)  # (its stator_names, max_current, max_rate)
             if why:
                 raise ValueError(why)
+        self._set_checked(commands)
+
+    def _set_checked(self, commands: dict) -> None:
+        """:meth:`set_stators` of commands ``{stator index: (current A | None, rate rad/s | None)}`` already checked
+        (a shadow run takes its leader's, which its leader's set_stators passed: the same limits)."""
         changed = {k: c for k, (c, _) in commands.items() if c is not None and c != self.current[k]}
         if changed:
             before = self.field_now()
@@ -289,10 +294,16 @@ class Simulator:
             out_y, out_N = self._no_rows  # (nothing is recorded into them)
         else:
             stops = np.asarray(sample_times, dtype=float)
-            record = np.ones(stops.size, dtype=np.bool_)
-            if stops[-1] < t_end:
-                stops = np.append(stops, t_end)
-                record = np.append(record, False)
+            n = stops.size
+            if stops[-1] < t_end:  # (np.append's arrays, made at once)
+                s2 = np.empty(n + 1)
+                s2[:n] = stops
+                s2[n] = t_end
+                stops = s2
+                record = np.ones(n + 1, dtype=np.bool_)
+                record[n] = False
+            else:
+                record = np.ones(n, dtype=np.bool_)
         assert out_y is not None and out_N is not None  # (rows to write the samples into)
         seg = self._segment()
         calls = steppers.integrate(self.terms, self.y, self.t, t_end, seg, stops, record, out_y, out_N, k_out,

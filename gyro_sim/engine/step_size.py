@@ -31,6 +31,8 @@ from gyro_sim.scenes.tolerance import has_symmetry_axis
 
 __all__ = ["State", "Lead", "StepSize"]
 
+_ZERO3 = np.zeros(3)  # (no axis: frozen_flow.torque_scale's; read only)
+
 
 class State(NamedTuple):
     """The run's state a step is planned from: time ``t`` (s), ``y`` (L, q, eddy modes, effects' states), the
@@ -235,9 +237,14 @@ class StepSize:
         # (the axis in the case frame: quat_to_matrix's column in scalar code, the same bits)
         e_a: Optional[np.ndarray] = None
         if self.attitude and Jt != Ja:
-            w, x, yq, z = (float(v) for v in y[3:7])
+            w, x, yq, z = y[3:7].tolist()
             e_a = np.array(_column(w, x, yq, z, ax))
         Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
+        if om.size and y.dtype == np.float64 and om.dtype == np.float64:
+            # (torque_scale's arguments as it makes them, its compiled part called at once: the same bits)
+            return frozen_flow._torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a if e_a is not None else _ZERO3,
+                                             e_a is not None, float(terms.c_m), terms.w_abs, terms.tau,
+                                             float(terms.tail))
         return frozen_flow.torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a, terms.c_m, terms.w, terms.tau, terms.tail)
 
     def torque_time(self, st: State) -> float:
@@ -247,24 +254,25 @@ class StepSize:
         Kept while the commands, the rates met, L and q are the same (a step plan asks for it for several knobs)."""
         terms, y = self.terms, st.y
         # (q only where it is integrated: without attitude it is NaN, and NaN != NaN would never find the kept one)
-        key = (st.current.tobytes(), st.rate.tobytes(), st.nu_max, *y[0:7 if self.attitude else 3].tolist())
+        yl = y[0:7 if self.attitude else 3].tolist()
+        key = (st.current.tobytes(), st.rate.tobytes(), st.nu_max, *yl)
         kept = self._tt
         if kept is not None and kept[0] == key:
             return kept[1]
         # |B| summed over the phasors: √2 b_k I_k a stator (its Bre, Bim are b_k I_k times two orthonormal vectors),
-        # |B_p| a general field term (scalar code: this is asked once per command segment)
-        B = sum(math.sqrt(2.0) * b * c for b, c in zip(terms.b.tolist(), st.current.tolist(), strict=True) if c > 0)
-        B += sum(float(np.linalg.norm(f)) for f in terms.field_B) if terms.field_B.size else 0.0
-        om = max(math.sqrt(float(y[0]) ** 2 + float(y[1]) ** 2 + float(y[2]) ** 2) * terms.Jinv_max,
-                 st.nu_max, max((abs(f) for f in terms.field_om.tolist()), default=0.0))
-        N = terms.c_m * B * B * (0.5 * sum(abs(v) for v in terms.w.tolist()) + terms.tail * (om + st.nu_max))
+        # |B_p| a general field term (scalar code: this is asked once per command segment; the model's constants
+        # made once, Terms)
+        B = sum(math.sqrt(2.0) * b * c for b, c in zip(terms.b_list, st.current.tolist(), strict=True) if c > 0)
+        B += terms.field_B_norm if terms.field_B.size else 0.0
+        om = max(math.sqrt(yl[0] ** 2 + yl[1] ** 2 + yl[2] ** 2) * terms.Jinv_max, st.nu_max, terms.field_om_absmax)
+        N = terms.c_m * B * B * (terms.w_half + terms.tail * (om + st.nu_max))
         ax = terms.sym_axis
         if N > 0 and terms.w.size and ax >= 0:
             # the mean torque at the present slips, no larger than the bound: a spin-up's step grows as its slip falls
             # (the eddy-mode models; qs_flow's plan and auto's choice of it were measured at the bound: on
             # nutation_slow the local scale made auto take qs_flow, whose ticks are not compiled, at 1.2x the cost)
             N = min(N, max(self.local_torque_scale(ax, st), frozen_flow.LOCAL_SCALE_MIN * N))
-        tt = min(terms.J.tolist()) * om / N if N > 0 and om > 0 else math.inf
+        tt = terms.J_min * om / N if N > 0 and om > 0 else math.inf
         self._tt = (key, tt)
         return tt
 

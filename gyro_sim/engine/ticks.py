@@ -226,6 +226,7 @@ class TickLoop:
 
     def __init__(self, r, law: Optional[CompiledLaw]):
         self.r = r
+        self._clock = CompileClock()  # (one for the loop's calls: their wall and compile times, summed)
         bk = r.breaks
         fly = r.scene.effects.flywheel
         knots = [t for t in fly.profile.time if 0 < t < r.T] if fly is not None else []
@@ -267,7 +268,9 @@ class TickLoop:
         j_all, j = j, self._within_call(i0, j)
         if j <= i0:  # (a break farther than a call's steps: Runner.advance, whose stepper calls are bounded)
             return None
-        with CompileClock() as clock:
+        clock = self._clock
+        wall0, comp0 = clock.wall, clock.compile
+        with clock:
             w0 = time.perf_counter()
             bk, law_at, rows, n_log, log_c, log_r = self._advance_main(r.breaks[i0:j])
             if j < j_all:  # (the call's steps bounded it: tuned to Simulator.CALL_WALL s a call)
@@ -277,8 +280,8 @@ class TickLoop:
             es = r.estimator
             if es.shadow is not None and common.size and not es._lazy and r.failure is None:
                 self._follow(common)
-        r.wall_time += clock.wall
-        r.compile_time += clock.compile
+        r.wall_time += clock.wall - wall0
+        r.compile_time += clock.compile - comp0
         if n_log:
             self._log(bk[:nb][law_at[:nb]][:n_log], log_c[:n_log], log_r[:n_log])
         return rows
@@ -291,7 +294,7 @@ class TickLoop:
         if until is not None:
             j = min(j, int(np.searchsorted(r.breaks, until, side="right")))
         room = r._base + r.out_y.shape[0]  # the first sample the output buffer cannot take
-        return min(j, i0 + int(np.searchsorted(self._s_end[i0:j], room, side="right")))
+        return min(j, i0 + int(self._s_end[i0:j].searchsorted(room, side="right")))
 
     def _within_call(self, i0: int, j: int) -> int:
         """The end (exclusive) of the breaks r.breaks[i0:j] one compiled call may take: those within the steps

@@ -417,6 +417,28 @@ class ErrorControl:
             n += k
         return n / acc if acc > 0 else math.inf
 
+    def _denoms(self) -> tuple[float, float]:
+        """(:attr:`denom`, :attr:`denom_estimate`) in one pass over the stretches (each its own sums, in the same
+        order: the same bits)."""
+        if not (sum(self.weights.values()) + sum(self.finer.values())):
+            return math.inf, math.inf
+        acc, acc_e, n = 0.0, 0.0, 0
+        shadow_steps, shadow_len = self.shadow_steps, self.shadow_len
+        for m, k in self.weights.items():
+            r = k / max(shadow_steps.get(m, k), 1)
+            if r >= R_MEASURABLE:
+                p = ORDER.get(m, STIFF_ORDER)
+                acc += k / (r ** p - 1.0)
+                r = max(min(r, k / max(shadow_len.get(m, k), 1)), R_MEASURABLE)
+                acc_e += k / (r ** p - 1.0)
+                n += k
+        for (m, f), k in self.finer.items():
+            x = k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))
+            acc += x
+            acc_e += x
+            n += k
+        return (n / acc if acc > 0 else math.inf), (n / acc_e if acc_e > 0 else math.inf)
+
     def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
                     stiff: bool = False, finer: float = 0.0, finer_ratio: float = FINER) -> None:
         """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
@@ -464,29 +486,47 @@ class ErrorControl:
         self.dLn = dLn / den
         return dL / den, dq / den, dp / den
 
-    def _diff(self, main, shadow) -> tuple[float, float, float, float]:
-        """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase)."""
-        L, Ls = main.y[0:3], shadow.y[0:3]
-        dLn = abs(norm3(L) - norm3(Ls))
+    def _diff(self, main, shadow, L_norm: Optional[float] = None) -> tuple[float, float, float, float]:
+        """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase);
+        ``L_norm``: |L| of the run, if known (norm3 of it: the same bits)."""
+        y, ys = main.y, shadow.y
+        L, Ls = y[0:3], ys[0:3]
+        dLn = abs((norm3(L) if L_norm is None else L_norm) - norm3(Ls))
         dq = dp = 0.0
         if self.attitude:
-            d, p = attitude_split_one(main.y[3:7], shadow.y[3:7], self.axis, L, Ls)
-            dq, dp = float(d), float(p)
+            dq, dp = attitude_split_one(y[3:7], ys[3:7], self.axis, L, Ls)
         return dLn, norm3(L - Ls), dq, dp
 
     def measure(self, main, shadow) -> tuple[float, float, float, float, float, float]:
         """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
-        self.L_max = max(self.L_max, norm3(main.y[0:3]))
-        raw = self._diff(main, shadow)
-        dL, dq, dp = self._now(main, shadow, raw=raw)
-        self.dL = max(self.dL, self.banked[0] + dL)
-        self.e_q = max(self.e_q, self.banked[1] + dq)
-        self.e_p = max(self.e_p, self.banked[2] + dp)
-        dLn = self.dLn
+        # (:meth:`_diff` of the pair and :meth:`_now` at the step control's denominator and at the estimate's, written
+        # out: one |L|, the attitude from Python floats, both denominators in one pass; the same bits)
+        y, ys = main.y, shadow.y
+        L, Ls = y[0:3], ys[0:3]
+        nL = norm3(L)
+        self.L_max = max(self.L_max, nL)
+        rLn = abs(nL - norm3(Ls))
+        rq = rp = 0.0
+        if self.attitude:
+            a, b = y[0:7].tolist(), ys[0:7].tolist()
+            rq, rp = attitude_split_one(a[3:7], b[3:7], self.axis, a[0:3], b[0:3])
+        rL = norm3(L - Ls)
+        den, den_e = self._denoms()
+        if math.isfinite(den):
+            dLn, dL, dq, dp = rLn / den, rL / den, rq / den, rp / den
+        else:
+            dLn, dL, dq, dp = 0.0, 0.0, 0.0, 0.0
+        bk = self.banked
+        self.dL = max(self.dL, bk[0] + dL)
+        self.e_q = max(self.e_q, bk[1] + dq)
+        self.e_p = max(self.e_p, bk[2] + dp)
         # the estimate's (denom_estimate): the same differences
-        now = self._now(main, shadow, self.denom_estimate, raw)
-        self.est = (max(self.est[0], self.banked_est[0] + now[0]), max(self.est[1], self.banked_est[1] + now[1]),
-                    max(self.est[2], self.banked_est[2] + now[2]))
+        if math.isfinite(den_e):
+            n0, n1, n2 = rL / den_e, rq / den_e, rp / den_e
+        else:
+            n0, n1, n2 = 0.0, 0.0, 0.0
+        est, be = self.est, self.banked_est
+        self.est = (max(est[0], be[0] + n0), max(est[1], be[1] + n1), max(est[2], be[2] + n2))
         self.dLn = dLn
         return dL, dq, dp, self.e_L, self.e_q, self.e_p
 

@@ -1,0 +1,104 @@
+"""The per-check and per-break code in Python floats (issue 28) gives the bits of the NumPy code it replaced."""
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from gyro_sim.engine.simulator import Simulator
+from gyro_sim.physics.frames import attitude_split, attitude_split_one
+from gyro_sim.scenes.scene import load_scene
+from gyro_sim.scenes.step_control import ORDER, ErrorControl
+
+
+def _bits(x) -> bytes:
+    return np.asarray(x, dtype=float).tobytes()
+
+
+@pytest.fixture(scope="module")
+def sim():
+    scene = load_scene("three_stators", overrides={"duration": 1.0})
+    return Simulator(scene, horizon=1.0, warn_plan=False)
+
+
+def test_phasors_in_python_floats_as_numpy(sim):
+    """Terms._phasors (the stators alone: Python floats) = its NumPy form, bit for bit, on random commands."""
+    terms = sim.terms
+    rng = np.random.default_rng(28)
+    k = terms.b.size
+    for _ in range(2000):
+        cur = rng.uniform(0.0, 2.0, k) * (rng.random(k) < 0.6)
+        rate = rng.uniform(-5e3, 5e3, k)
+        phase = rng.uniform(-50.0, 50.0, k)
+        t = float(rng.uniform(0.0, 10.0))
+        a, b = terms._phasors(t, cur, rate, phase), terms._phasors_array(t, cur, rate, phase)
+        for x, y in zip(a, b, strict=True):
+            assert x.shape == y.shape and x.dtype == y.dtype and _bits(x) == _bits(y)
+
+
+def test_attitude_split_one_as_the_error_control_took_it():
+    """attitude_split_one from arrays and from lists of Python floats: the same bits; and within round-off of the
+    vectorised attitude_split."""
+    rng = np.random.default_rng(1)
+    for _ in range(3000):
+        q1 = rng.standard_normal(4)
+        q1 /= np.linalg.norm(q1)
+        q2 = q1 + rng.standard_normal(4) * 10 ** rng.uniform(-10, -1)
+        q2 /= np.linalg.norm(q2)
+        L1 = rng.standard_normal(3) * 10 ** rng.uniform(-6, 2)
+        L2 = L1 + rng.standard_normal(3) * 1e-6 * np.abs(L1).max()
+        ax = int(rng.integers(-1, 3))
+        a = attitude_split_one(q1, q2, ax, L1, L2)
+        b = attitude_split_one(q1.tolist(), q2.tolist(), ax, L1.tolist(), L2.tolist())
+        c = attitude_split_one(list(q1), tuple(q2), ax, list(L1), tuple(L2))  # (NumPy scalars: float() of each)
+        assert _bits(a) == _bits(b) == _bits(c)
+        d, p = attitude_split(q1, q2, ax, L1, L2)
+        assert a[0] == pytest.approx(float(d), rel=1e-6, abs=1e-12)
+        assert a[1] == pytest.approx(float(p), rel=1e-6, abs=1e-12)
+
+
+def test_denominators_in_one_pass():
+    """ErrorControl._denoms = (denom, denom_estimate), bit for bit, over random stretches."""
+    rng = np.random.default_rng(2)
+    methods = list(ORDER)
+    for _ in range(500):
+        ctl = ErrorControl.__new__(ErrorControl)
+        ctl.weights, ctl.shadow_steps, ctl.shadow_len, ctl.finer = {}, {}, {}, {}
+        for m in rng.choice(methods, size=int(rng.integers(0, 4)), replace=False).tolist():
+            k = int(rng.integers(0, 5000))
+            ctl.weights[m] = k
+            ctl.shadow_steps[m] = int(rng.integers(0, k + 2))
+            ctl.shadow_len[m] = ctl.shadow_steps[m] + float(rng.uniform(0.0, k / 2 + 1))
+        for _ in range(int(rng.integers(0, 3))):
+            ctl.finer[(str(rng.choice(methods)), float(rng.uniform(4.0, 40.0)))] = float(rng.uniform(0.0, 100.0))
+        a, b = ctl._denoms()
+        assert _bits(a) == _bits(ctl.denom) and _bits(b) == _bits(ctl.denom_estimate)
+
+
+def test_measure_as_diff_and_now(sim):
+    """ErrorControl.measure written out = its parts (_diff, then _now at each denominator), bit for bit."""
+    sh = sim.follower()
+    sh.y = sim.y.copy()
+    rng = np.random.default_rng(3)
+    ctl = ErrorControl(sim.step_plan, True, 1.0, adapt=False, axis=2)
+    ctl.note_method("lawson8", 400, 110)
+    ctl.note_method("etdrk4", 300, 150, finer=0.5)
+    for _ in range(300):
+        sh.y[0:7] = sim.y[0:7] + rng.standard_normal(7) * 10 ** rng.uniform(-14, -4)
+        ref = copy.deepcopy(ctl)
+        got = ctl.measure(sim, sh)
+        # the parts, as measure took them before issue 28
+        ref.L_max = max(ref.L_max, float(np.linalg.norm(sim.y[0:3])))
+        raw = ref._diff(sim, sh)
+        dL, dq, dp = ref._now(sim, sh, raw=raw)
+        dLn = ref.dLn
+        ref.dL = max(ref.dL, ref.banked[0] + dL)
+        ref.e_q = max(ref.e_q, ref.banked[1] + dq)
+        ref.e_p = max(ref.e_p, ref.banked[2] + dp)
+        now = ref._now(sim, sh, ref.denom_estimate, raw)
+        ref.est = tuple(max(e, b + n) for e, b, n in zip(ref.est, ref.banked_est, now, strict=True))
+        assert _bits(got) == _bits((dL, dq, dp, ref.e_L, ref.e_q, ref.e_p))
+        assert _bits(ctl.est) == _bits(ref.est) and _bits(ctl.dLn) == _bits(dLn)
+        assert math.isfinite(got[0])
