@@ -85,14 +85,20 @@ def first_run(scene: str, tmp: Path) -> list[dict]:
 
 def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
     """The scene's controller node and the simulator node (``sim_args``: more ``-p name:=value``) as processes on a
-    free domain; the simulator waits for the controller's two subscriptions. Returns the simulator's result."""
+    free domain, on CPUs as ``gyro-sim run --ros`` runs them (:func:`gyro_sim.ros.launch.node_cpus`: one in
+    lockstep); the simulator waits for the controller's two subscriptions. Returns the simulator's result."""
+    from gyro_sim.ros.launch import node_cpus
+
     env = _env()
+    cpus = node_cpus("auto", "realtime" if "mode:=realtime" in sim_args else "lockstep")
+    pin = (lambda: os.sched_setaffinity(0, cpus)) if cpus else None
     ctl = subprocess.Popen([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
-                            f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                           preexec_fn=pin)
     try:
         return subprocess.run([sys.executable, "-m", "gyro_sim.ros.simulator_node", "--ros-args", "-p",
                                f"scene:={scene}", "-p", "wait_for_subscribers:=2", *sim_args],
-                              env=env, capture_output=True, text=True, timeout=900)
+                              env=env, capture_output=True, text=True, timeout=900, preexec_fn=pin)
     finally:
         ctl.send_signal(2)
         try:

@@ -122,6 +122,13 @@ def _cmd_run(args) -> int:
             check_write_target(args.record, "--record")
         except (RecordingError, FileExistsError) as exc:
             return _error(str(exc))
+    if args.ros:
+        from gyro_sim.ros.launch import node_cpus
+
+        try:
+            node_cpus(args.node_cpu)
+        except ValueError as exc:
+            return _error(str(exc))
     if args.ros and args.fidelity not in (None, "full"):
         return _error(f"--fidelity {args.fidelity}: the ROS simulator node runs the full model; drop --ros or --fidelity")
     try:
@@ -364,7 +371,7 @@ def _run_ros(args, scene, name, src) -> int:
 
     bag = args.record or Path(args.out) / f"{name}_{time.strftime('%Y%m%d-%H%M%S')}"
     code = launch(src, mode=args.mode, record=str(bag), duration=args.duration, rate_factor=args.rate_factor,
-                  with_controller=scene.controller is not None, force=args.force)
+                  with_controller=scene.controller is not None, force=args.force, node_cpu=args.node_cpu)
     if code == 0:
         return _summarise_bag(bag, Path(args.out) / f"{name}.png")
     stopped_by = {128 + int(s): s.name for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}.get(code)

@@ -20,6 +20,12 @@ Signals and lifetime (``gyro-sim run --ros``):
 * A controller that ends with an error (or is killed) while the simulator runs: the launcher says so and sends the
   simulator :data:`CONTROLLER_ENDED_SIGNAL`, whose ``on_controller_lost`` policy then applies (default ``stop``: the
   bag is marked ``failed: controller lost at t = …``, status 1).
+* In lockstep both nodes run on one CPU (:func:`node_cpus`, ``gyro-sim run --ros --node-cpu``): they hand each tick
+  to each other, so they never need two cores at once, and beside processes that take every core (a CPU hog per
+  core) a hand-over on one core is prompt while one across cores waits for the other core's hog: measured on this
+  2-core machine, the default scene's lockstep 1697–2432 ticks/s beside two hogs with both nodes on one CPU, 750–840
+  with each on its own, 840–1929 left to the scheduler (where it happens to put them decides); idle 2315–2616 on
+  one CPU, 2383–2444 left to the scheduler (docs/benchmark.md).
 * :func:`launch` returns the simulator's exit status: 0 the run reached its end, 130 / 143 it was stopped by
   SIGINT / SIGTERM (also when the node was ended by the signal before it could handle it: -2 / -15 are given as
   130 / 143), anything else a failure (1: the run failed, e.g. its controller was lost; 2: the node refused its scene
@@ -90,12 +96,34 @@ def node_command(module: str, params: dict) -> list[str]:
     return cmd
 
 
-def node_preexec() -> Callable[[], None]:
+def node_cpus(node_cpu="auto", mode: str = "lockstep") -> Optional[set]:
+    """The CPUs the nodes are held to: ``"auto"`` in lockstep ``mode`` one CPU of this process's (the last: the first
+    tends to take the machine's interrupts; None where this process has only one, or the platform has no affinity),
+    in the other modes None (real time: the simulator paces, publishes and records while the controller works, and
+    on one CPU they take turns: 1316–1352 of 2000 commands in time at 1 kHz against 1715–1741 left to the scheduler);
+    an int that CPU in any mode (ValueError naming ``--node-cpu`` where this process may not use it); None or
+    ``"none"``: left to the scheduler."""
+    if node_cpu is None or node_cpu == "none" or not hasattr(os, "sched_getaffinity"):
+        return None
+    allowed = sorted(os.sched_getaffinity(0))
+    if node_cpu == "auto":
+        return {allowed[-1]} if len(allowed) > 1 and mode == "lockstep" else None
+    try:
+        cpu = int(node_cpu)
+    except (TypeError, ValueError):
+        cpu = -1
+    if cpu not in allowed:
+        raise ValueError(f"--node-cpu {node_cpu}: must be auto, none or a CPU this process may use ({allowed})")
+    return {cpu}
+
+
+def node_preexec(cpus: Optional[set] = None) -> Callable[[], None]:
     """The ``preexec_fn`` of a node (run in the child between fork and exec): SIGINT/SIGTERM blocked until
     :data:`NODE_BOOT` unblocks them, and, on Linux, ``prctl(PR_SET_PDEATHSIG, SIGTERM)``: the child gets SIGTERM when
     this process (the thread calling Popen) ends, also by SIGKILL (elsewhere, or without a usable libc, the nodes'
     parent watch, :func:`gyro_sim.ros.common.watch_parent`, does it). A child whose parent ended before the prctl
-    exits at once (status 143)."""
+    exits at once (status 143). ``cpus``: the CPUs it is held to (:func:`node_cpus`), set before it starts a
+    thread, so the middleware's threads are held there too."""
     prctl = None
     if sys.platform.startswith("linux"):
         try:
@@ -109,6 +137,8 @@ def node_preexec() -> Callable[[], None]:
 
     def preexec() -> None:  # nothing here may need a lock another thread of the parent could hold
         signal.pthread_sigmask(signal.SIG_BLOCK, stop)
+        if cpus:
+            os.sched_setaffinity(0, cpus)
         if prctl is not None:
             prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
             if os.getppid() != parent:
@@ -174,7 +204,8 @@ def _as_status(code: int) -> int:
 
 def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, duration: Optional[float] = None,
            rate_factor: float = 1.0, watchdog_timeout: float = 2.0, with_controller: bool = True,
-           domain_id: Optional[int] = None, progress: Optional[bool] = None, force: bool = False) -> int:
+           domain_id: Optional[int] = None, progress: Optional[bool] = None, force: bool = False,
+           node_cpu="auto") -> int:
     """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends; then end the
     controller (SIGINT).
 
@@ -184,7 +215,9 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
     thread that lives as long as the call (PR_SET_PDEATHSIG is tied to the thread that starts the nodes; it returns
     only once they have ended). ``progress`` (default: stderr is a terminal): the simulator shows a progress line.
     ``force``: the simulator runs a plan beyond the step budget (its ``force`` parameter, gyro_sim/engine/budget.py).
+    ``node_cpu``: the CPU both nodes run on (:func:`node_cpus`: ``"auto"``, one in lockstep; an int; ``"none"``).
     """
+    cpus = node_cpus(node_cpu, mode)
     if progress is None:
         progress = sys.stderr.isatty()
     if Path(scene).is_file():
@@ -198,7 +231,7 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
         sim_params["force"] = "true"
     if record:
         sim_params["record"] = str(Path(record).resolve())
-    preexec = node_preexec()
+    preexec = node_preexec(cpus)
     procs: list[tuple[str, subprocess.Popen]] = []
     with _Signals() as sigs:
         try:
