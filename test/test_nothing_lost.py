@@ -4,14 +4,12 @@ private mount namespace (`unshare -m`, skipped with the reason where it cannot b
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import shutil
 import signal
 import subprocess
 import sys
 import time
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -194,33 +192,52 @@ def test_long_streamed_run_reads_its_result_back_from_the_bag(tmp_path):
     assert r.preview() is r  # read now: the result itself
 
 
-def test_streamed_run_memory_does_not_grow_with_its_duration(tmp_path, monkeypatch):
+#: the measurement of test_streamed_run_memory_does_not_grow_with_its_duration, in a process of its own: tracemalloc
+#: traces every thread's allocations, and in a pytest-xdist worker its channel's thread allocates as tests are handed
+#: over (two suites side by side, four workers on two cores: 321 B a sample against ~100 alone)
+MEMORY = """
+import json, math, sys, tracemalloc
+from pathlib import Path
+import gyro_sim
+import gyro_sim.io.bag_writer as writer_mod
+import gyro_sim.io.recording as rec_mod
+from gyro_sim.io.recording import record_run
+from gyro_sim.engine.simulate import Runner
+tmp = Path(sys.argv[1])
+# (both bounds reached within 2 s: the buffer and the preview are bounded, at smaller sizes here)
+rec_mod.PREVIEW_ROWS, rec_mod.STREAM_BUFFER_ROWS, writer_mod.CHUNK_WALL = 256, 512, math.inf
+scene = gyro_sim.load_scene("nutation_oblate")  # 1 kHz output and control ticks
+record_run(scene, tmp / "warm", duration=0.05)
+peaks = {}
+for T in (2.0, 8.0):
+    tracemalloc.start()
+    record_run(scene, tmp / f"b{T:g}", duration=T, keep_bytes=0)
+    peaks[T] = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+rows = {T: Runner(scene, T, attitude=True, buffer_rows=2).t_out.size for T in peaks}  # (ticks are rows too)
+print(json.dumps({"peaks": peaks, "rows": rows}))
+"""
+
+
+def test_streamed_run_memory_does_not_grow_with_its_duration(tmp_path):
     """Defect 7: arrays for the whole duration were reserved at the start (~330 B per output sample in-process,
     ~2 KB per sample while writing a bag). A streamed run now holds STREAM_BUFFER_ROWS rows: its peak of traced
     allocations grows from 2 s to 8 s (4x the samples) by less than 150 bytes per sample (its time grid), and the
     Runner never holds more rows. (Chunks close by simulated span only here: one closed by the wall clock is
-    smaller on a busy machine, and a 2 s run whose chunks the load cut short once made 8 s look 1 MB dearer.)"""
-    import gyro_sim.io.bag_writer as writer_mod
-    import gyro_sim.io.recording as rec_mod
+    smaller on a busy machine, and a 2 s run whose chunks the load cut short once made 8 s look 1 MB dearer. Measured
+    in a process of its own: :data:`MEMORY`.)"""
+    import json
 
-    # (both bounds reached within 2 s: the buffer and the preview are bounded, at smaller sizes here)
-    monkeypatch.setattr(rec_mod, "PREVIEW_ROWS", 256)
-    monkeypatch.setattr(rec_mod, "STREAM_BUFFER_ROWS", 512)
-    monkeypatch.setattr(writer_mod, "CHUNK_WALL", math.inf)
-    scene = gyro_sim.load_scene("nutation_oblate")  # 1 kHz output and control ticks
-    record_run(scene, tmp_path / "warm", duration=0.05)
-    peaks = {}
-    for T in (2.0, 8.0):
-        tracemalloc.start()
-        record_run(scene, tmp_path / f"b{T:g}", duration=T, keep_bytes=0)
-        peaks[T] = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-    r = Runner(scene, 8.0, attitude=True, buffer_rows=STREAM_BUFFER_ROWS)
+    r = Runner(gyro_sim.load_scene("nutation_oblate"), 8.0, attitude=True, buffer_rows=STREAM_BUFFER_ROWS)
     assert r.out_y.shape[0] == STREAM_BUFFER_ROWS < r.t_out.size  # (the default buffer)
+    out = subprocess.run([sys.executable, "-c", MEMORY, str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout.splitlines()[-1])
+    peaks = {float(k): v for k, v in got["peaks"].items()}
+    rows = {float(k): v for k, v in got["rows"].items()}
     print(f"\npeak traced memory: 2 s {peaks[2.0] / 1e6:.2f} MB, 8 s {peaks[8.0] / 1e6:.2f} MB")
     # what still grows with the run: its time grid (output instants, breaks, ticks: 8 bytes each, and the
     # temporaries that sort them), allocated at the start; was ~2 KB a sample
-    rows = {T: Runner(scene, T, attitude=True, buffer_rows=2).t_out.size for T in peaks}  # (ticks are rows too)
     per_sample = (peaks[8.0] - peaks[2.0]) / (rows[8.0] - rows[2.0])
     print(f"growth: {per_sample:.0f} B per output sample (bound 150)")
     assert per_sample < 150
