@@ -20,12 +20,14 @@ Signals and lifetime (``gyro-sim run --ros``):
 * A controller that ends with an error (or is killed) while the simulator runs: the launcher says so and sends the
   simulator :data:`CONTROLLER_ENDED_SIGNAL`, whose ``on_controller_lost`` policy then applies (default ``stop``: the
   bag is marked ``failed: controller lost at t = …``, status 1).
-* In lockstep both nodes run on one CPU (:func:`node_cpus`, ``gyro-sim run --ros --node-cpu``): they hand each tick
+* ``--node-cpu auto`` (not the default) holds both lockstep nodes to one CPU (:func:`node_cpus`): they hand each tick
   to each other, so they never need two cores at once, and beside processes that take every core (a CPU hog per
   core) a hand-over on one core is prompt while one across cores waits for the other core's hog: measured on this
   2-core machine, the default scene's lockstep 1697–2432 ticks/s beside two hogs with both nodes on one CPU, 750–840
   with each on its own, 840–1929 left to the scheduler (where it happens to put them decides); idle 2315–2616 on
-  one CPU, 2383–2444 left to the scheduler (docs/benchmark.md).
+  one CPU, 2383–2444 left to the scheduler (docs/benchmark.md). Not the default: a recorded run (every
+  ``gyro-sim run --ros``) writes its bag while the controller works, and on one CPU they take turns: idle 1278 /
+  1295 ticks/s on one CPU against 2085 / 1981 left to the scheduler.
 * :func:`launch` returns the simulator's exit status: 0 the run reached its end, 130 / 143 it was stopped by
   SIGINT / SIGTERM (also when the node was ended by the signal before it could handle it: -2 / -15 are given as
   130 / 143), anything else a failure (1: the run failed, e.g. its controller was lost; 2: the node refused its scene
@@ -205,7 +207,7 @@ def _as_status(code: int) -> int:
 def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, duration: Optional[float] = None,
            rate_factor: float = 1.0, watchdog_timeout: float = 2.0, with_controller: bool = True,
            domain_id: Optional[int] = None, progress: Optional[bool] = None, force: bool = False,
-           node_cpu="auto") -> int:
+           node_cpu: object = None) -> int:
     """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends; then end the
     controller (SIGINT).
 
@@ -215,7 +217,8 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
     thread that lives as long as the call (PR_SET_PDEATHSIG is tied to the thread that starts the nodes; it returns
     only once they have ended). ``progress`` (default: stderr is a terminal): the simulator shows a progress line.
     ``force``: the simulator runs a plan beyond the step budget (its ``force`` parameter, gyro_sim/engine/budget.py).
-    ``node_cpu``: the CPU both nodes run on (:func:`node_cpus`: ``"auto"``, one in lockstep; an int; ``"none"``).
+    ``node_cpu``: the CPU both nodes run on (:func:`node_cpus`: ``"auto"``, one in lockstep; an int; None, the
+    default, or ``"none"``: left to the scheduler).
     """
     cpus = node_cpus(node_cpu, mode)
     if progress is None:
