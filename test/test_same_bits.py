@@ -10,11 +10,50 @@ import pytest
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.physics.frames import attitude_split, attitude_split_one
 from gyro_sim.scenes.scene import load_scene
-from gyro_sim.scenes.step_control import ORDER, ErrorControl
+from gyro_sim.scenes.step_control import ORDER, R_MEASURABLE, STIFF_ORDER, ErrorControl
 
 
 def _bits(x) -> bytes:
     return np.asarray(x, dtype=float).tobytes()
+
+
+# --- the error control's code before issue 28's cut (the reference the one-pass code is held to) ----------------
+def _ref_denom(ctl, lengths: bool) -> float:
+    """ErrorControl.denom (``lengths`` False) / denom_estimate (True) as one sum each."""
+    if not sum(ctl.weights.values()) + sum(ctl.finer.values()):
+        return math.inf
+    acc, n = 0.0, 0
+    for m, k in ctl.weights.items():
+        r = k / max(ctl.shadow_steps.get(m, k), 1)
+        if r >= R_MEASURABLE:
+            if lengths:
+                r = max(min(r, k / max(ctl.shadow_len.get(m, k), 1)), R_MEASURABLE)
+            acc += k / (r ** ORDER.get(m, STIFF_ORDER) - 1.0)
+            n += k
+    for (m, f), k in ctl.finer.items():
+        acc += k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))
+        n += k
+    return n / acc if acc > 0 else math.inf
+
+
+def _ref_diff(ctl, main, shadow) -> tuple:
+    """(| |L| − |L_s| |, |L − L_s|, direction, phase) of the pair, from the arrays."""
+    L, Ls = main.y[0:3], shadow.y[0:3]
+    dL = L - Ls
+    dLn = abs(math.sqrt(float(L.dot(L))) - math.sqrt(float(Ls.dot(Ls))))
+    dq = dp = 0.0
+    if ctl.attitude:
+        d, p = attitude_split_one(main.y[3:7], shadow.y[3:7], ctl.axis, L, Ls)
+        dq, dp = float(d), float(p)
+    return dLn, math.sqrt(float(dL.dot(dL))), dq, dp
+
+
+def _ref_now(raw: tuple, den: float) -> tuple:
+    """((|ΔL|, direction, phase) errors, error of |L|) of the raw differences at denominator ``den``."""
+    if not math.isfinite(den):
+        return (0.0, 0.0, 0.0), 0.0
+    dLn, dL, dq, dp = raw
+    return (dL / den, dq / den, dp / den), dLn / den
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +99,8 @@ def test_attitude_split_one_as_the_error_control_took_it():
 
 
 def test_denominators_in_one_pass():
-    """ErrorControl._denoms = (denom, denom_estimate), bit for bit, over random stretches."""
+    """ErrorControl._denoms = (denom, denom_estimate) as each was summed alone (_ref_denom), bit for bit, over random
+    stretches."""
     rng = np.random.default_rng(2)
     methods = list(ORDER)
     for _ in range(500):
@@ -74,11 +114,13 @@ def test_denominators_in_one_pass():
         for _ in range(int(rng.integers(0, 3))):
             ctl.finer[(str(rng.choice(methods)), float(rng.uniform(4.0, 40.0)))] = float(rng.uniform(0.0, 100.0))
         a, b = ctl._denoms()
+        assert _bits(a) == _bits(_ref_denom(ctl, False)) and _bits(b) == _bits(_ref_denom(ctl, True))
         assert _bits(a) == _bits(ctl.denom) and _bits(b) == _bits(ctl.denom_estimate)
 
 
 def test_measure_as_diff_and_now(sim):
-    """ErrorControl.measure written out = its parts (_diff, then _now at each denominator), bit for bit."""
+    """ErrorControl.measure written out = its parts as they were (_ref_diff, then _ref_now at each denominator), bit
+    for bit."""
     sh = sim.follower()
     sh.y = sim.y.copy()
     rng = np.random.default_rng(3)
@@ -91,13 +133,12 @@ def test_measure_as_diff_and_now(sim):
         got = ctl.measure(sim, sh)
         # the parts, as measure took them before issue 28
         ref.L_max = max(ref.L_max, float(np.linalg.norm(sim.y[0:3])))
-        raw = ref._diff(sim, sh)
-        dL, dq, dp = ref._now(sim, sh, raw=raw)
-        dLn = ref.dLn
+        raw = _ref_diff(ref, sim, sh)
+        (dL, dq, dp), dLn = _ref_now(raw, _ref_denom(ref, False))
         ref.dL = max(ref.dL, ref.banked[0] + dL)
         ref.e_q = max(ref.e_q, ref.banked[1] + dq)
         ref.e_p = max(ref.e_p, ref.banked[2] + dp)
-        now = ref._now(sim, sh, ref.denom_estimate, raw)
+        now, _ = _ref_now(raw, _ref_denom(ref, True))
         ref.est = tuple(max(e, b + n) for e, b, n in zip(ref.est, ref.banked_est, now, strict=True))
         assert _bits(got) == _bits((dL, dq, dp, ref.e_L, ref.e_q, ref.e_p))
         assert _bits(ctl.est) == _bits(ref.est) and _bits(ctl.dLn) == _bits(dLn)

@@ -4,6 +4,7 @@ shadow run and the error control) is the :class:`~gyro_sim.engine.shadow.ErrorEs
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Optional
 
@@ -354,13 +355,9 @@ class Runner:
                           None if self.failure is not None else self.error_estimate(), self.failure)
 
 
+@functools.cache
 def _control_input():
     """gyro_ctl.laws.ControlInput (imported on first use: a run without a law does not import gyro_ctl)."""
-    if not _CI:
-        from gyro_ctl.laws import ControlInput
+    from gyro_ctl.laws import ControlInput
 
-        _CI.append(ControlInput)
-    return _CI[0]
-
-
-_CI: list = []
+    return ControlInput

@@ -240,12 +240,12 @@ class StepSize:
             w, x, yq, z = y[3:7].tolist()
             e_a = np.array(_column(w, x, yq, z, ax))
         Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
-        if om.size and y.dtype == np.float64 and om.dtype == np.float64:
-            # (torque_scale's arguments as it makes them, its compiled part called at once: the same bits)
-            return frozen_flow._torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a if e_a is not None else _ZERO3,
-                                             e_a is not None, float(terms.c_m), terms.w_abs, terms.tau,
-                                             float(terms.tail))
-        return frozen_flow.torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a, terms.c_m, terms.w, terms.tau, terms.tail)
+        if not om.size:  # (no field: frozen_flow.torque_scale's answer)
+            return math.inf
+        # (torque_scale's compiled part on the arguments it would make: the phasors and the state are float64 arrays,
+        # |w| kept in Terms; the same bits without its conversions at every segment)
+        return frozen_flow._torque_scale(Bre, Bim, om, y[0:3], Jt, Ja, e_a if e_a is not None else _ZERO3,
+                                         e_a is not None, float(terms.c_m), terms.w_abs, terms.tau, float(terms.tail))
 
     def torque_time(self, st: State) -> float:
         """J_min Ω / N (s): the time the torque's scale N takes to change the fastest rate Ω by itself (inf without

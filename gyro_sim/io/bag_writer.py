@@ -19,11 +19,11 @@ from gyro_sim.io.bag_format import (  # noqa: F401 (RESERVE_NAME: re-exported)
     _PREFIX, BAG_VERSION, CUSTOM_KEYS, EARLY_METADATA, RESERVE_NAME, _typestore, cdr_message, write_chunk_crcs,
 )
 from gyro_sim.io.messages import (
-    QOS, TOPIC_CLOCK, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_SCENE,
-    TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS, TOPIC_TF, TOPIC_TF_STATIC, TOPIC_TORQUE, TOPICS,
+    QOS, TOPIC_DIAGNOSTICS, TOPIC_EFFECTS, TOPIC_SCENE, TOPIC_STATOR_COMMANDS, TOPIC_STATORS, TOPIC_STATUS,
+    TOPIC_TF_STATIC, TOPICS,
     command_message, effects_message, scene_message, stamp_ns, state_messages, status_message, tf_static_message,
 )
-from gyro_sim.io.cdr_template import Template
+from gyro_sim.io.cdr_template import NUMBER_PATHS, STAMP_PATHS, Template
 from gyro_sim.io.signals import RunInterrupted, _held_signals, _signals_deferred
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -122,19 +122,6 @@ def _nameless_file(folder: Path) -> int:
     return fd
 
 
-#: a header's stamp, as a :class:`~gyro_sim.io.cdr_template.Template` path
-STAMP_PATHS = (("header", "stamp", "sec"), ("header", "stamp", "nanosec"))
-_VECTOR = STAMP_PATHS + tuple(("vector", k) for k in "xyz")
-#: topic -> where the numbers of its per-sample message are (the builders' dicts: gyro_sim.io.messages); the stators'
-#: and the commands' (a JointState's stamp, position, velocity, effort) follow from their lengths (BagRecorder._encode)
-_NUMBER_PATHS: dict[str, tuple] = {
-    TOPIC_CLOCK: (("clock", "sec"), ("clock", "nanosec")),
-    TOPIC_IMU: STAMP_PATHS + tuple(("orientation", k) for k in "xyzw") + tuple(("angular_velocity", k) for k in "xyz"),
-    TOPIC_KINETIC_MOMENT: _VECTOR, TOPIC_EULER: _VECTOR, TOPIC_TORQUE: _VECTOR,
-    TOPIC_TF: tuple(("transforms", j) + p for j in range(2) for p in STAMP_PATHS + tuple(
-        ("transform", "rotation", k) for k in "xyzw")),
-    TOPIC_STATORS: (), TOPIC_STATOR_COMMANDS: (),
-}
 _NO_TEMPLATE = object()
 
 
@@ -402,7 +389,7 @@ class BagRecorder:
         :meth:`_serialize`. ``fields``: a builder's dict (:func:`gyro_sim.io.messages.state_messages`,
         :func:`gyro_sim.io.messages.command_message`), whose strings and constants are its topic's own; a JointState's
         names and lengths are part of its shape."""
-        paths: Optional[tuple] = _NUMBER_PATHS.get(topic)
+        paths: Optional[tuple] = NUMBER_PATHS.get(topic)
         if paths is None:
             return self._serialize(topic, fields)
         key: tuple = (topic,)

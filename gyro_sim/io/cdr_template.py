@@ -9,9 +9,25 @@ import struct
 from typing import Any, Optional
 
 from gyro_sim.io.bag_format import _typestore, cdr_message
-from gyro_sim.io.messages import TOPICS
+from gyro_sim.io.messages import (TOPIC_CLOCK, TOPIC_EULER, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS,
+                                  TOPIC_STATORS, TOPIC_TF, TOPIC_TORQUE, TOPICS)
 
-__all__ = ["Template"]
+__all__ = ["Template", "STAMP_PATHS", "NUMBER_PATHS"]
+
+#: a header's stamp, as a :class:`Template` path
+STAMP_PATHS = (("header", "stamp", "sec"), ("header", "stamp", "nanosec"))
+_VECTOR = STAMP_PATHS + tuple(("vector", k) for k in "xyz")
+#: topic -> where the numbers of its per-sample message are (the builders' dicts: gyro_sim.io.messages), in the order
+#: a :class:`Template` of them takes them; the stators' and the commands' (a JointState's stamp, position, velocity,
+#: effort) follow from their lengths (gyro_sim.io.bag_writer.BagRecorder._encode)
+NUMBER_PATHS: dict[str, tuple] = {
+    TOPIC_CLOCK: (("clock", "sec"), ("clock", "nanosec")),
+    TOPIC_IMU: STAMP_PATHS + tuple(("orientation", k) for k in "xyzw") + tuple(("angular_velocity", k) for k in "xyz"),
+    TOPIC_KINETIC_MOMENT: _VECTOR, TOPIC_EULER: _VECTOR, TOPIC_TORQUE: _VECTOR,
+    TOPIC_TF: tuple(("transforms", j) + p for j in range(2) for p in STAMP_PATHS + tuple(
+        ("transform", "rotation", k) for k in "xyzw")),
+    TOPIC_STATORS: (), TOPIC_STATOR_COMMANDS: (),
+}
 
 _STRUCT = {"int8": "b", "uint8": "B", "int16": "h", "uint16": "H", "int32": "i", "uint32": "I", "int64": "q",
            "uint64": "Q", "float32": "f", "float64": "d"}

@@ -16,11 +16,11 @@ from types import SimpleNamespace
 from typing import Any, Optional
 
 from gyro_sim.io.bag_format import _typestore, cdr_message
-from gyro_sim.io.cdr_template import Template
+from gyro_sim.io.cdr_template import NUMBER_PATHS, STAMP_PATHS, Template
 from gyro_sim.io.messages import (TOPIC_CLOCK, TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_STATOR_COMMANDS, TOPICS,
                                   command_message, to_ros)
 
-__all__ = ["Wire", "Template", "CommandReader", "take_serialized", "command_view", "state_bytes"]
+__all__ = ["Wire", "Template", "STAMP_PATHS", "CommandReader", "take_serialized", "command_view", "state_bytes"]
 
 
 def take_serialized(sub) -> Optional[bytes]:
@@ -108,10 +108,6 @@ class Wire:
             return deserialize_message(raw, self.classes[topic])
 
 
-#: where a header's stamp is, as a :class:`Template` path
-STAMP_PATHS = (("header", "stamp", "sec"), ("header", "stamp", "nanosec"))
-
-
 def state_templates(wire: "Wire") -> dict:
     """topic → :class:`Template` of the state messages a controller reads (/gyro/imu: stamp, orientation x y z w,
     angular velocity x y z; /gyro/kinetic_moment: stamp, L x y z) and /clock (stamp), as the simulator sends them
@@ -119,10 +115,7 @@ def state_templates(wire: "Wire") -> dict:
     bytes."""
     from gyro_sim.io.messages import state_messages
 
-    paths = {TOPIC_IMU: STAMP_PATHS + tuple(("orientation", k) for k in "xyzw")
-             + tuple(("angular_velocity", k) for k in "xyz"),
-             TOPIC_KINETIC_MOMENT: STAMP_PATHS + tuple(("vector", k) for k in "xyz"),
-             TOPIC_CLOCK: (("clock", "sec"), ("clock", "nanosec"))}
+    paths = {t: NUMBER_PATHS[t] for t in (TOPIC_IMU, TOPIC_KINETIC_MOMENT, TOPIC_CLOCK)}
     msgs = state_messages(0.0, [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3, [0.0] * 3, [], [], [], [],
                           only=list(paths))
     return {t: Template(t, msgs[t], p) for t, p in paths.items() if t in wire.classes and wire.serialized(t)}

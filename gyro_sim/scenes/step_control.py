@@ -392,34 +392,19 @@ class ErrorControl:
         """r^p − 1 of the run, as the step control takes it: r the ratio of the run's steps to the shadow's over the
         stretches of each stepper (SHADOW_RATIO where steps are not cut by stops, more where the run's stops cut its
         steps and the shadow's do not), harmonically weighted by the run's steps (inf: only exact steps)."""
-        return self._denom(False)
+        return self._denoms()[0]
 
     @property
     def denom_estimate(self) -> float:
         """r^p − 1 of the run as its error estimate takes it: r of the steps' lengths (:meth:`note_method`), at
         least R_MEASURABLE where the counts measure."""
-        return self._denom(True)
-
-    def _denom(self, lengths: bool) -> float:
-        n = sum(self.weights.values()) + sum(self.finer.values())
-        if not n:
-            return math.inf
-        acc, n = 0.0, 0
-        for m, k in self.weights.items():
-            r = k / max(self.shadow_steps.get(m, k), 1)
-            if r >= R_MEASURABLE:  # (where the shadow took the same steps its difference says nothing)
-                if lengths:
-                    r = max(min(r, k / max(self.shadow_len.get(m, k), 1)), R_MEASURABLE)
-                acc += k / (r ** ORDER.get(m, STIFF_ORDER) - 1.0)
-                n += k
-        for (m, f), k in self.finer.items():  # (the shadow the finer: the difference is the run's error less 1/f^p of
-            acc += k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))  # it, f its steps' ratio to the run's there)
-            n += k
-        return n / acc if acc > 0 else math.inf
+        return self._denoms()[1]
 
     def _denoms(self) -> tuple[float, float]:
-        """(:attr:`denom`, :attr:`denom_estimate`) in one pass over the stretches (each its own sums, in the same
-        order: the same bits)."""
+        """(:attr:`denom`, :attr:`denom_estimate`) in one pass over the stretches: r of the counts where the shadow
+        measured (r ≥ R_MEASURABLE: where it took the same steps its difference says nothing), and for the estimate r
+        of the steps' lengths (at least R_MEASURABLE); a stretch the shadow followed finer counts 1 − f^−p (the
+        difference is the run's error less 1/f^p of it, f its steps' ratio to the run's there)."""
         if not (sum(self.weights.values()) + sum(self.finer.values())):
             return math.inf, math.inf
         acc, acc_e, n = 0.0, 0.0, 0
@@ -473,34 +458,11 @@ class ErrorControl:
     def note_L(self, L_norm: float) -> None:
         self.L_max = max(self.L_max, L_norm)
 
-    def _now(self, main, shadow, den: Optional[float] = None,
-             raw: Optional[tuple] = None) -> tuple[float, float, float]:
-        """(|ΔL| N m s, direction error rad, spin phase error rad) of the run now from its difference with the
-        shadow (:func:`gyro_sim.physics.frames.attitude_split_one`); ``self.dLn``: the error of |L| (what turns the
-        spin and precession rates: the phases drift at it over J). ``raw``: :meth:`_diff` of the pair, if known."""
-        den = self.denom if den is None else den
-        if not math.isfinite(den):
-            self.dLn = 0.0
-            return 0.0, 0.0, 0.0
-        dLn, dL, dq, dp = self._diff(main, shadow) if raw is None else raw
-        self.dLn = dLn / den
-        return dL / den, dq / den, dp / den
-
-    def _diff(self, main, shadow, L_norm: Optional[float] = None) -> tuple[float, float, float, float]:
-        """The raw differences of the run and its shadow now: (| |L| − |L_s| |, |L − L_s|, direction, phase);
-        ``L_norm``: |L| of the run, if known (norm3 of it: the same bits)."""
-        y, ys = main.y, shadow.y
-        L, Ls = y[0:3], ys[0:3]
-        dLn = abs((norm3(L) if L_norm is None else L_norm) - norm3(Ls))
-        dq = dp = 0.0
-        if self.attitude:
-            dq, dp = attitude_split_one(y[3:7], ys[3:7], self.axis, L, Ls)
-        return dLn, norm3(L - Ls), dq, dp
-
     def measure(self, main, shadow) -> tuple[float, float, float, float, float, float]:
         """Update the running maxima; returns (|ΔL|, direction error, phase error) now and (e_L, e_q, e_p)."""
-        # (:meth:`_diff` of the pair and :meth:`_now` at the step control's denominator and at the estimate's, written
-        # out: one |L|, the attitude from Python floats, both denominators in one pass; the same bits)
+        # (the raw differences (| |L| − |L_s| |, |L − L_s|, direction, phase; attitude_split_one) over the step
+        # control's denominator and over the estimate's; self.dLn: the error of |L|, which turns the spin and
+        # precession rates: the phases drift at it over J)
         y, ys = main.y, shadow.y
         L, Ls = y[0:3], ys[0:3]
         nL = norm3(L)
