@@ -39,6 +39,7 @@ from gyro_sim.compiled import frozen_flow, kernels, qs_flow
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.compiled.effects import ON
 from gyro_sim.common.stamps import stamp_ns
+from gyro_sim.engine.model import holds, sorted_union
 from gyro_sim.engine.steppers import COMPILED_STEPPERS, arguments
 
 __all__ = ["TickLoop", "tick_loop", "advance", "python_ticks", "MAX_BREAKS"]
@@ -237,16 +238,15 @@ class TickLoop:
         bk = r.breaks
         fly = r.scene.effects.flywheel
         knots = [t for t in fly.profile.time if 0 < t < r.T] if fly is not None else []
-        hard = np.isin(bk, np.concatenate([np.array([c.time for c in r._cmds], dtype=float),
-                                           np.array(knots, dtype=float)]))
+        hard = holds(bk, sorted_union(np.array([c.time for c in r._cmds], dtype=float), np.array(knots, dtype=float)))
         # a check or the end (not a command's or knot's break) ends a call: the loop advances to it, then the shadow
         # follows there as Runner.advance has it follow (ErrorEstimator.follow)
-        self._soft = np.isin(bk, np.concatenate([r.estimator._checks, np.array([r.T])])) & ~hard
+        self._soft = holds(bk, sorted_union(r.estimator._checks, np.array([r.T]))) & ~hard
         # the first break at or after each that a call stops before (hard) or at (soft): len(bk) where none is
         self._next_hard = _next(hard)
         self._next_soft = _next(self._soft)
-        self._tick = np.isin(bk, r._ticks) if law is not None else np.zeros(bk.size, bool)
-        self._common = np.isin(bk, r._common)
+        self._tick = holds(bk, r._ticks) if law is not None else np.zeros(bk.size, bool)
+        self._common = holds(bk, r._common)
         # the samples each break records: those up to it and within round-off past it (Runner.advance's ``sel``)
         self._s_end = np.searchsorted(r.t_out, bk + 1e-12 * np.maximum(1.0, bk), side="right")
         sim = r.sim
