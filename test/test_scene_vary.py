@@ -58,6 +58,23 @@ def test_run_refuses_an_invalid_model_copy():
             {"name": "z1", "axis": [1, 0, 0], "coil_constant": 1.0, "current": -2.0}]}))
 
 
+def test_check_valid_keeps_only_what_validated():
+    """check_valid skips data that validated before, kept by value (the model_dump): an invalid copy of a scene that
+    validated (model_copy skips validation) is refused, every time, and the scene itself still passes."""
+    from gyro_sim.scenes.scene import check_valid
+
+    sc = load_scene("three_stators")
+    check_valid(sc)
+    check_valid(sc)  # (kept: no second validation)
+    for _ in range(2):  # (an invalid scene is never kept)
+        with pytest.raises(SceneError, match="duration = -5"):
+            check_valid(sc.model_copy(update={"duration": -5.0}))
+        with pytest.raises(SceneError, match="duration = 0"):
+            check_valid(sc.model_copy(update={"duration": 0}))
+    check_valid(sc)
+    check_valid(sc.model_copy(update={"duration": 2}))  # (2 and 2.0: both valid)
+
+
 def test_cli_run_set(tmp_path, capsys):
     """``gyro-sim run SCENE --set KEY=VALUE`` (sweep's syntax) changes the scene; bad ones get one line, status 2."""
     code = cli.main(["run", "three_stators", "--quiet", "--out", str(tmp_path), "--set", "duration=0.05",

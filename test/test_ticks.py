@@ -212,6 +212,30 @@ def test_compiled_ticks_give_the_python_loops_run_bit_for_bit(monkeypatch, name,
     assert n_ticks > 40 and len(calls) < n_ticks / 2
 
 
+def test_checks_and_end_in_the_compiled_loop(monkeypatch):
+    """The error control's checks and the end end a call of the compiled loop, the shadow following there (they
+    went through Runner.advance one at a time: 25 Python advances on the default scene over 2 s, with the law
+    evaluated in Python before each): now only the first sample takes Runner.advance, with or without a law."""
+    for ov in ({}, {"controller": None}, {"torque_model": "quasi_static"}):
+        scene = gyro_sim.load_scene("spinup_thin_shell", overrides=ov)
+        calls = _counted_advances(monkeypatch)
+        r = gyro_sim.run(scene, duration=2.0)
+        assert r.error_estimate is not None and len(calls) == 1, (ov, len(calls))
+
+
+@given(st.lists(st.sampled_from([0.0, -0.0, 0.1, 0.25, 1.0, 1e-300, 3.5, 7.0]), max_size=12),
+       st.lists(st.sampled_from([0.0, 0.1, 0.3, 1.0, 2.0, 7.0]), max_size=6))
+def test_sorted_union_and_holds_are_unique_and_isin(a, b):
+    """The run's break sets (engine.model.sorted_union, holds) are np.unique's and np.isin's, bit for bit."""
+    from gyro_sim.engine.model import holds, sorted_union
+
+    a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+    u = sorted_union(a, b)
+    ref = np.unique(np.concatenate([a, b]))
+    assert u.tobytes() == ref.tobytes()
+    assert np.array_equal(holds(a, u), np.isin(a, u)) and np.array_equal(holds(a, np.unique(b)), np.isin(a, b))
+
+
 def test_on_samples_get_the_same_rows(monkeypatch):
     """With ``on_samples`` (the CLI's progress line: samples are breaks) the rows come in chunks; together they are
     the Python loop's rows, and the run is the same."""

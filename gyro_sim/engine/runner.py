@@ -13,7 +13,7 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
-from gyro_sim.engine.model import body_rates, controller_period
+from gyro_sim.engine.model import body_rates, controller_period, sorted_union
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.saving import output_times, run_result, sample_arrays
 from gyro_sim.engine.shadow import ErrorEstimator
@@ -88,10 +88,10 @@ class Runner:
             sample_breaks = True
         # (NumPy arrays, 8 bytes an instant: a long run's breaks are not a Python list of floats)
         # the breaks of every run, samples or not: where the shadow follows (ErrorEstimator.follow)
-        self._common = np.unique(np.concatenate([np.array([c.time for c in self._cmds], dtype=float), ticks,
-                                                 np.array([T], dtype=float), np.array(sorted(knots), dtype=float),
-                                                 self.estimator._checks]))
-        self.breaks = np.unique(np.concatenate([t_out if sample_breaks else np.zeros(0), self._common]))
+        self._common = sorted_union(np.array([c.time for c in self._cmds], dtype=float), ticks,
+                                    np.array([T], dtype=float), np.array(sorted(knots), dtype=float),
+                                    self.estimator._checks)
+        self.breaks = sorted_union(t_out, self._common) if sample_breaks else self._common.copy()
         self.estimator.set_breaks(t_out, self.breaks, self._common)
         # output rows held in memory: all of them, or a buffer of ``buffer_rows`` that release() empties (a
         # streamed run: its rows go to a bag as they come, memory stays flat however long the run)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 
 from gyro_sim.compiled import effects
-from gyro_sim.engine.model import AVERAGED_ERROR
+from gyro_sim.engine.model import AVERAGED_ERROR, sorted_union
 from gyro_sim.physics.frames import norm3
 from gyro_sim.scenes.accuracy import (FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
                                       ErrorEstimate)
@@ -82,7 +82,7 @@ class ErrorEstimator:
         where the shadow follows, :meth:`follow`), all s, sorted."""
         self.breaks, self._common = breaks, common
         if self.shadow is not None:
-            stops = np.unique(np.concatenate([t_out, self.breaks, [0.0]]))
+            stops = sorted_union(t_out, self.breaks, np.zeros(1))
             # (its step at most SHADOW_RATIO times the run's longest: the run's steps end at its stops)
             self.shadow.lead_gap = float(np.max(np.diff(stops))) if stops.size > 1 else math.inf
 

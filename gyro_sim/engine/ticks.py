@@ -4,8 +4,9 @@ Break by break (:meth:`gyro_sim.simulate.Runner.advance`), each controller tick 
 60 µs on the default scene, measured before this module: docs/benchmark.md): the law on a
 :class:`gyro_ctl.laws.ControlInput`, the commands applied to the simulator and its shadow, the call of each one's
 stepper, the samples' bookkeeping, the shadow's follow. :class:`TickLoop` advances a runner through consecutive
-*plain* breaks (controller ticks and output samples; not a scene command, an error-control check, a flywheel knot
-or the end, which stay with the Python loop) in one compiled call: at each break it takes the same steps between
+*plain* breaks (controller ticks and output samples; not a scene command or a flywheel knot, which stay with the
+Python loop; an error-control check or the end ends a call, where the shadow then follows as
+:meth:`Runner.advance` has it) in one compiled call: at each break it takes the same steps between
 the same stops as :meth:`Simulator.advance`, writes the samples' stator columns and turns the field phases on
 as :meth:`Runner.advance` does, and at a tick evaluates the built-in law (:func:`gyro_ctl.law_kernels.
 law_commands`, the code the ROS controller node calls) on the state. It stops at the first tick whose commands
@@ -38,6 +39,7 @@ from gyro_sim.compiled import frozen_flow, kernels, qs_flow
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.compiled.effects import ON
 from gyro_sim.common.stamps import stamp_ns
+from gyro_sim.engine.model import holds, sorted_union
 from gyro_sim.engine.steppers import COMPILED_STEPPERS, arguments
 
 __all__ = ["TickLoop", "tick_loop", "advance", "python_ticks", "MAX_BREAKS"]
@@ -213,6 +215,12 @@ def breaks(Pf, Pz, Pa, Pq, y, t, t_seg, h_max, bk, s_end, t_out, s0, base, out_y
     return nb, steps, s, n_log
 
 
+def _next(mask: np.ndarray) -> np.ndarray:
+    """For each index, the first index at or after it where ``mask`` holds (mask.size where none does)."""
+    at = np.append(np.flatnonzero(mask), mask.size)
+    return at[np.searchsorted(at, np.arange(mask.size))]
+
+
 def stepper(sim, seg: tuple) -> tuple:
     """(Pf, Pz, Pa, Pq): the arguments of the stepper :meth:`Simulator.advance` calls for a simulator's segment
     ``seg`` (:meth:`Simulator._segment`) in its slot (:func:`gyro_sim.engine.steppers.arguments`)."""
@@ -230,15 +238,15 @@ class TickLoop:
         bk = r.breaks
         fly = r.scene.effects.flywheel
         knots = [t for t in fly.profile.time if 0 < t < r.T] if fly is not None else []
-        special = np.concatenate([np.array([c.time for c in r._cmds], dtype=float), r.estimator._checks,
-                                  np.array(knots, dtype=float), np.array([r.T])])
-        plain = ~np.isin(bk, special)
-        # the first break at or after each that is not plain (len(bk) where none is)
-        stops = np.flatnonzero(~plain)
-        self._next_special = stops[np.searchsorted(stops, np.arange(bk.size))] if stops.size else np.full(bk.size,
-                                                                                                           bk.size)
-        self._tick = np.isin(bk, r._ticks) if law is not None else np.zeros(bk.size, bool)
-        self._common = np.isin(bk, r._common)
+        hard = holds(bk, sorted_union(np.array([c.time for c in r._cmds], dtype=float), np.array(knots, dtype=float)))
+        # a check or the end (not a command's or knot's break) ends a call: the loop advances to it, then the shadow
+        # follows there as Runner.advance has it follow (ErrorEstimator.follow)
+        self._soft = holds(bk, sorted_union(r.estimator._checks, np.array([r.T]))) & ~hard
+        # the first break at or after each that a call stops before (hard) or at (soft): len(bk) where none is
+        self._next_hard = _next(hard)
+        self._next_soft = _next(self._soft)
+        self._tick = holds(bk, r._ticks) if law is not None else np.zeros(bk.size, bool)
+        self._common = holds(bk, r._common)
         # the samples each break records: those up to it and within round-off past it (Runner.advance's ``sel``)
         self._s_end = np.searchsorted(r.t_out, bk + 1e-12 * np.maximum(1.0, bk), side="right")
         sim = r.sim
@@ -280,6 +288,8 @@ class TickLoop:
             es = r.estimator
             if es.shadow is not None and common.size and not es._lazy and r.failure is None:
                 self._follow(common)
+            if self._soft[r._bi - 1] and es.shadow is not None and r.failure is None:
+                es.follow(float(bk[nb - 1]), None)  # (at a check or the end: as Runner.advance)
         r.wall_time += clock.wall - wall0
         r.compile_time += clock.compile - comp0
         if n_log:
@@ -290,7 +300,7 @@ class TickLoop:
         """The end (exclusive index of r.breaks) of the plain breaks the next call may take."""
         r = self.r
         i0 = r._bi
-        j = min(int(self._next_special[i0]), i0 + MAX_BREAKS)
+        j = min(int(self._next_hard[i0]), int(self._next_soft[i0]) + 1, i0 + MAX_BREAKS)
         if until is not None:
             j = min(j, int(np.searchsorted(r.breaks, until, side="right")))
         room = r._base + r.out_y.shape[0]  # the first sample the output buffer cannot take
