@@ -29,7 +29,7 @@ REALTIME_SCENE = ("nutation_oblate", 2.0)  # 1 kHz control
 
 
 #: where the ROS rows run the nodes (gyro_sim.ros.launch.node_cpus): as ``gyro-sim run --ros`` does by default
-NODE_CPU = "none"
+NODE_CPU = "auto"
 
 #: a process that burns one CPU until killed (the lockstep rows "with one hog per core")
 HOG = ("sh", "-c", "while :; do :; done")
@@ -90,10 +90,10 @@ def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
     """The scene's controller node and the simulator node (``sim_args``: more ``-p name:=value``) as processes on a
     free domain, on CPUs as ``gyro-sim run --ros`` runs them by default (:data:`NODE_CPU`); the simulator
     waits for the controller's two subscriptions. Returns the simulator's result."""
-    from gyro_sim.ros.launch import node_cpus
+    from gyro_sim.ros.launch import node_cpus, writer_cpus_env
 
-    env = _env()
     cpus = node_cpus(NODE_CPU, "realtime" if "mode:=realtime" in sim_args else "lockstep")
+    env = {**_env(), **writer_cpus_env(cpus)}
     pin = (lambda: os.sched_setaffinity(0, cpus)) if cpus else None
     ctl = subprocess.Popen([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
                             f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

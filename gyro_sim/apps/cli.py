@@ -126,10 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="run the simulator and controller nodes as separate ROS 2 processes (DDS on localhost)")
     run.add_argument("--mode", choices=("lockstep", "realtime", "freerun"), default="lockstep",
                      help="with --ros: timing mode of the simulator node (default: lockstep)")
-    run.add_argument("--node-cpu", metavar="CPU", default="none",
-                     help="with --ros: the CPU both nodes run on (default none: left to the scheduler; auto: in "
-                          "lockstep one of this process's). On one CPU a lockstep tick's hand-over stays prompt "
-                          "beside busy cores, but the bag is written in turn with the controller's work")
+    run.add_argument("--node-cpu", metavar="CPU", default="auto",
+                     help="with --ros: the CPU both nodes run on (default auto: in lockstep one of this process's, "
+                          "the bag's writer on the others; none: left to the scheduler; or a CPU number). On one CPU "
+                          "a lockstep tick's hand-over stays prompt beside busy cores")
     run.add_argument("--rate-factor", metavar="F", type=float, default=1.0,
                      help="with --ros --mode realtime, or --live: simulated seconds per wall second (default 1)")
     run.add_argument("--live", action="store_true",

@@ -24,6 +24,7 @@ from gyro_sim.io.messages import (
     command_message, effects_message, scene_message, stamp_ns, state_messages, status_message, tf_static_message,
 )
 from gyro_sim.io.cdr_template import NUMBER_PATHS, STAMP_PATHS, Template
+from gyro_sim.physics.frames import euler_angles, quat_to_matrix
 from gyro_sim.io.signals import RunInterrupted, _held_signals, _signals_deferred
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -448,6 +449,18 @@ class BagRecorder:
             msgs[TOPIC_EFFECTS] = eff
         ns = stamp_ns(t)
         self._write(ns, [(topic, self._encode(topic, f)) for topic, f in msgs.items()], float(t))
+
+    def write_samples(self, s: Mapping[str, Any], names: Sequence[str]) -> None:
+        """Every row of a run's output arrays ``s`` (:meth:`gyro_sim.engine.runner.Runner.samples`) as
+        :meth:`write_sample` writes one; Euler angles None: computed here from q and L, as the runner does
+        (:func:`gyro_sim.engine.saving.sample_arrays`; the rows of a run with attitude)."""
+        effects = s.get("effects") or {}
+        eul = s.get("euler")
+        if eul is None:
+            eul = euler_angles(quat_to_matrix(s["q"]), s["L"])
+        for i in range(s["t"].size):
+            self.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], eul[i], s["torque"][i], names,
+                              s["current"][i], s["rate"][i], s["phase"][i], {k: v[i] for k, v in effects.items()})
 
     def write_command(self, t: float, names: Sequence[str], current: Optional[Any], rate: Optional[Any]) -> None:
         """A stator command at time t: currents (A) and/or signed rates (rad/s) of the named stators."""

@@ -20,14 +20,13 @@ Signals and lifetime (``gyro-sim run --ros``):
 * A controller that ends with an error (or is killed) while the simulator runs: the launcher says so and sends the
   simulator :data:`CONTROLLER_ENDED_SIGNAL`, whose ``on_controller_lost`` policy then applies (default ``stop``: the
   bag is marked ``failed: controller lost at t = …``, status 1).
-* ``--node-cpu auto`` (not the default) holds both lockstep nodes to one CPU (:func:`node_cpus`): they hand each tick
+* ``--node-cpu auto`` (the default) holds both lockstep nodes to one CPU (:func:`node_cpus`): they hand each tick
   to each other, so they never need two cores at once, and beside processes that take every core (a CPU hog per
-  core) a hand-over on one core is prompt while one across cores waits for the other core's hog: measured on this
-  2-core machine, the default scene's lockstep 1697–2432 ticks/s beside two hogs with both nodes on one CPU, 750–840
-  with each on its own, 840–1929 left to the scheduler (where it happens to put them decides); idle 2315–2616 on
-  one CPU, 2383–2444 left to the scheduler (docs/benchmark.md). Not the default: a recorded run (every
-  ``gyro-sim run --ros``) writes its bag while the controller works, and on one CPU they take turns: idle 1278 /
-  1295 ticks/s on one CPU against 2085 / 1981 left to the scheduler.
+  core) a hand-over on one core is prompt while one across cores waits for the other core's hog. The simulator's
+  bag is written by a process of its own (:mod:`gyro_sim.io.bag_process`) on the other CPUs
+  (:func:`writer_cpus_env`). Measured on this 2-core machine, default scene, 5 alternated runs each (medians,
+  docs/benchmark.md): recorded, 1457 ticks/s idle and 967 beside one hog per core on one CPU, against 1336 / 640 left
+  to the scheduler; not recorded, 1607 / 1460 against 1825 / 757. ``none`` leaves them to the scheduler.
 * :func:`launch` returns the simulator's exit status: 0 the run reached its end, 130 / 143 it was stopped by
   SIGINT / SIGTERM (also when the node was ended by the signal before it could handle it: -2 / -15 are given as
   130 / 143), anything else a failure (1: the run failed, e.g. its controller was lost; 2: the node refused its scene
@@ -119,6 +118,18 @@ def node_cpus(node_cpu="auto", mode: str = "lockstep") -> Optional[set]:
     return {cpu}
 
 
+def writer_cpus_env(cpus: Optional[set]) -> dict:
+    """The nodes' environment entry that keeps the simulator's bag writer (:mod:`gyro_sim.io.bag_process`) off the
+    CPU the nodes are held to (``cpus``, :func:`node_cpus`): on this process's other CPUs; {} where they are not
+    held."""
+    if not cpus:
+        return {}
+    from gyro_sim.io.bag_process import WRITER_CPUS_ENV
+
+    others = sorted(set(os.sched_getaffinity(0)) - set(cpus))
+    return {WRITER_CPUS_ENV: ",".join(str(c) for c in others)} if others else {}
+
+
 def node_preexec(cpus: Optional[set] = None) -> Callable[[], None]:
     """The ``preexec_fn`` of a node (run in the child between fork and exec): SIGINT/SIGTERM blocked until
     :data:`NODE_BOOT` unblocks them, and, on Linux, ``prctl(PR_SET_PDEATHSIG, SIGTERM)``: the child gets SIGTERM when
@@ -207,7 +218,7 @@ def _as_status(code: int) -> int:
 def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, duration: Optional[float] = None,
            rate_factor: float = 1.0, watchdog_timeout: float = 2.0, with_controller: bool = True,
            domain_id: Optional[int] = None, progress: Optional[bool] = None, force: bool = False,
-           node_cpu: object = None) -> int:
+           node_cpu: object = "auto") -> int:
     """Run the simulator (and, if ``with_controller``, the controller) until the simulator ends; then end the
     controller (SIGINT).
 
@@ -217,8 +228,8 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
     thread that lives as long as the call (PR_SET_PDEATHSIG is tied to the thread that starts the nodes; it returns
     only once they have ended). ``progress`` (default: stderr is a terminal): the simulator shows a progress line.
     ``force``: the simulator runs a plan beyond the step budget (its ``force`` parameter, gyro_sim/engine/budget.py).
-    ``node_cpu``: the CPU both nodes run on (:func:`node_cpus`: ``"auto"``, one in lockstep; an int; None, the
-    default, or ``"none"``: left to the scheduler).
+    ``node_cpu``: the CPU both nodes run on (:func:`node_cpus`: ``"auto"``, the default, one in lockstep; an int;
+    None or ``"none"``: left to the scheduler).
     """
     cpus = node_cpus(node_cpu, mode)
     if progress is None:
@@ -227,6 +238,7 @@ def launch(scene: str, *, mode: str = "lockstep", record: Optional[str] = None, 
         scene = str(Path(scene).resolve())
     env = ros_env(domain_id)
     env[PARENT_PID_ENV] = str(os.getpid())
+    env.update(writer_cpus_env(cpus))
     sim_params = {"scene": scene, "mode": mode, "rate_factor": float(rate_factor),
                   "watchdog_timeout": float(watchdog_timeout), "duration": float(duration or 0.0),
                   "progress": "true" if progress else "false"}

@@ -392,15 +392,17 @@ class Loop:
         self.lost_log: list = []  # (t, why, policy) of each time the controller was lost
         self.new_run()  # before the bag is opened: a run that cannot be made leaves no half-written bag
         if p["record"]:
-            from gyro_sim.io.recording import BagRecorder, scene_text, stator_frames
+            from gyro_sim.io.bag_process import BagProcess
+            from gyro_sim.io.recording import scene_text, stator_frames
 
-            self.recorder = BagRecorder(p["record"], scene_text(node.scene), node.scene.name,
-                                        extra={"gyro_sim.mode": p["mode"],
-                                               "gyro_sim.control_period": repr(p["control_period"]),
-                                               # the run's accuracy plan is made for it (gyro_sim.rerun)
-                                               "gyro_sim.planned_duration": repr(float(self.runner.T)),
-                                               **(node.fault_config.as_custom() if node.fault_config.active else {})},
-                                        static_tf=stator_frames(node.scene))
+            # (written by a process of its own: the tick's critical path only sends the numbers)
+            self.recorder = BagProcess(p["record"], scene_text(node.scene), node.scene.name,
+                                       extra={"gyro_sim.mode": p["mode"],
+                                              "gyro_sim.control_period": repr(p["control_period"]),
+                                              # the run's accuracy plan is made for it (gyro_sim.rerun)
+                                              "gyro_sim.planned_duration": repr(float(self.runner.T)),
+                                              **(node.fault_config.as_custom() if node.fault_config.active else {})},
+                                       static_tf=stator_frames(node.scene))
 
     def new_run(self) -> None:
         """A fresh run of the scene from t = 0 (start, and gyro/reset)."""
@@ -569,6 +571,8 @@ class Loop:
         if timeout <= 0 and now < self.next_pump:
             return
         self.next_pump = now + PUMP_PERIOD
+        if self.recorder is not None:
+            self.recorder.flush_due()  # (the bag's queued writes, also while paused)
         self.spin_once(timeout)
 
     def drain(self, pending: int, strict: bool) -> None:
@@ -752,18 +756,15 @@ class Loop:
             return
         # (the Euler angles only where someone reads them: a third of the samples' cost)
         # (no energy: no topic carries it)
-        s = self.runner.samples(rows, euler=self.recorder is not None or TOPIC_EULER in self.node.subscribed(),
-                                energy=False)
+        # (the bag's writer computes them where no one subscribes)
+        s = self.runner.samples(rows, euler=TOPIC_EULER in self.node.subscribed(), energy=False)
         self.node.publish_samples(s, self.names)
         if s["t"].size:
             # (its last row is taken where it is published again, while waiting for a command: the rows are still
             # in the runner's buffer then, as a slice of them would be)
             self.last_published["s"] = s
         if self.recorder is not None:
-            for i in range(s["t"].size):
-                self.recorder.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], s["euler"][i],
-                                           s["torque"][i], self.names, s["current"][i], s["rate"][i], s["phase"][i],
-                                           {k: v[i] for k, v in s["effects"].items()})
+            self.recorder.write_samples(s, self.names)
 
     # --- the run -------------------------------------------------------------------------------------
     def run(self) -> int:
