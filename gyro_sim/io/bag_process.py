@@ -1,22 +1,24 @@
 """A bag written by a process of its own: :class:`BagProcess`, :class:`gyro_sim.io.bag_writer.BagRecorder`'s writing
 interface, whose writes are sent over a socket to a child process (``python -m gyro_sim.io.bag_process``) that runs
-the BagRecorder.
+the BagRecorder. The simulator node records so in lockstep and freerun (in real time it writes the bag itself, in the
+pacing's idle time).
 
-Why: the simulator node's lockstep tick is a hand-over between two processes. Writing a state sample's seven
-messages costs ~90 µs of Python (the CDR bytes and rosbags' MCAP records), ~0.3 ms a tick with the commands and
-diagnostics; in the node, that is on the tick's critical path whenever the controller and the simulator share a
-CPU. Here the node pays one ``send`` of the sample rows' numbers (~10 µs) and the child writes them on another
-CPU, or, on one CPU, while the node waits for its command.
+Why: the lockstep tick is a hand-over between two processes. Writing a state sample's seven messages costs ~90 µs
+of Python (the CDR bytes and rosbags' MCAP records); in the node that is on the tick's critical path, and with both
+nodes on one CPU (``--node-cpu auto``) it took turns with the controller. Here the node queues the sample rows'
+numbers (~10 µs a tick, no Euler angles: the child computes those no one subscribed to) and sends the queue every
+:data:`BATCH_WALL` s or :data:`BATCH_BYTES`; the child writes it on another CPU (``GYRO_SIM_WRITER_CPUS``).
 
-The child writes what it is sent in order (a bag identical to the BagRecorder's in the node). Its failures (a
-full disk: :class:`RecordingError`) come back at the next write or at :meth:`BagProcess.close`. It ignores SIGINT,
-SIGTERM and SIGHUP and runs in a process group of its own: the node decides how the bag ends (its ``interrupted``
-and ``close``); if the node ends without closing it (SIGKILL), the child sees the socket close and closes the bag
-with ``gyro_sim.end`` = ``interrupted: the simulator process ended without closing the bag``. A socket buffer's
-worth of writes (~200 kB) can wait for the child: beyond, ``send`` waits (back-pressure, memory stays flat).
+The child writes what it is sent in order: the bag is the BagRecorder's, message for message. Its failures (a full
+disk: :class:`RecordingError`) reach the node at its next send or at :meth:`BagProcess.close`. It ignores SIGINT,
+SIGTERM and SIGHUP and runs in a session of its own: the node decides how the bag ends (``interrupted``, ``close``).
+If the node ends without closing it (kill -9), the child sees the socket close and closes the bag with what it was
+sent, ``gyro_sim.end`` = ``interrupted: the simulator process ended without closing the bag``: at most the last
+:data:`BATCH_WALL` s of writes are lost. A socket buffer's worth of writes (~200 kB) can wait for the child; beyond,
+a send waits for it (memory stays flat).
 
-``GYRO_SIM_WRITER_CPUS`` (comma-separated CPU numbers, set by :func:`gyro_sim.ros.launch.launch` when it holds the
-nodes to one CPU): the CPUs the child may use, so it is not held to the nodes' one.
+``GYRO_SIM_WRITER_CPUS`` (comma-separated CPU numbers; :func:`gyro_sim.ros.launch.writer_cpus_env` sets it where the
+launcher holds the nodes to one CPU): the CPUs the child may use.
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ import subprocess
 import sys
 import time
 from multiprocessing.connection import Connection
-from typing import Any, Mapping, Optional, Sequence, Union
+from typing import Any, Literal, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
@@ -72,7 +74,8 @@ class BagProcess:
         ours, theirs = socket.socketpair()
         try:
             self._proc = subprocess.Popen([sys.executable, "-m", "gyro_sim.io.bag_process", str(theirs.fileno())],
-                                          pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, process_group=0)
+                                          pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+                                          start_new_session=True)
         finally:
             theirs.close()
         self._conn = Connection(ours.detach())
@@ -154,7 +157,7 @@ class BagProcess:
     def __enter__(self) -> "BagProcess":
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         if exc_type is not None and self._conn is not None:
             self.interrupted(f"{exc_type.__name__}" + (f" ({exc})" if str(exc) else ""))
         self.close()
@@ -208,6 +211,7 @@ class BagProcess:
         if not batch:
             return
         self._check()
+        assert self._conn is not None
         try:
             self._conn.send_bytes(pickle.dumps(batch, protocol=pickle.HIGHEST_PROTOCOL))
         except OSError:
@@ -215,6 +219,7 @@ class BagProcess:
             raise RecordingError(self._failed) from None
 
     def _reply(self) -> tuple:
+        assert self._conn is not None
         try:
             return pickle.loads(self._conn.recv_bytes())
         except (EOFError, OSError):
@@ -238,14 +243,15 @@ def _write_rows(rec, data: bytes, names: list) -> None:
     widths = (1, 3, 4, 3, 3, k, k, k) + ((3,) if euler else ())
     m = np.frombuffer(data, dtype=np.float64, offset=len(_ROWS)).reshape(-1, sum(widths))
     cols = np.cumsum((0,) + widths)
-    s = dict(zip(_SAMPLE_KEYS + ("euler",), (m[:, a:b] for a, b in zip(cols[:-1], cols[1:], strict=True))))
+    keys = _SAMPLE_KEYS + (("euler",) if euler else ())
+    s = dict(zip(keys, (m[:, a:b] for a, b in zip(cols[:-1], cols[1:], strict=True)), strict=True))
     s["t"] = m[:, 0]
     rec.write_samples(s, names)
 
 
 def _serve(conn: Connection, rec) -> Optional[tuple]:
     """Write what comes until ``close`` (its reply) or the socket closes (the node is gone: None)."""
-    state = {"names": [], "failed": None}
+    state: dict = {"names": [], "failed": None}
     while True:
         try:
             batch = pickle.loads(conn.recv_bytes())

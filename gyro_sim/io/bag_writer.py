@@ -462,6 +462,10 @@ class BagRecorder:
             self.write_sample(s["t"][i], s["L"][i], s["q"][i], s["omega_b"][i], eul[i], s["torque"][i], names,
                               s["current"][i], s["rate"][i], s["phase"][i], {k: v[i] for k, v in effects.items()})
 
+    def flush_due(self) -> None:
+        """Nothing: every write is in the bag's open chunk at once (:class:`gyro_sim.io.bag_process.BagProcess`,
+        whose interface this is, queues them)."""
+
     def write_command(self, t: float, names: Sequence[str], current: Optional[Any], rate: Optional[Any]) -> None:
         """A stator command at time t: currents (A) and/or signed rates (rad/s) of the named stators."""
         data = self._encode(TOPIC_STATOR_COMMANDS, command_message(t, names, current, rate))
