@@ -30,7 +30,9 @@ state broke: not finite, or |L| beyond what the fields can drive, :attr:`Runner.
 status topic, the ``done:`` line (no error estimate) and the bag's ``gyro_sim.end`` say ``failed: <what> at t = …``.
 2: a refused scene or parameter (one ``simulator: error:`` line). A command beyond a stator's ``max_current`` /
 ``max_rate`` (gyro_sim/scenes/limits.py) is refused like any malformed one: state unchanged, a rate-limited
-``refused command:`` status. A SIGKILL leaves an unfinished bag (no index or metadata).
+``refused command:`` status. In lockstep and freerun the bag is written by a process of its own
+(:mod:`gyro_sim.io.bag_process`): a SIGKILL of the node leaves it closed with what was sent, marked interrupted; in
+real time (written here) a SIGKILL leaves an unfinished bag (no index or metadata; ``gyro-sim bag recover``).
 """
 from __future__ import annotations
 
