@@ -158,3 +158,26 @@ def test_samples_with_effects_or_other_dtypes_go_as_they_are(tmp_path):
     with BagProcess(tmp_path / "b", "name: x\n", "x") as bp:
         bp.write_samples(s, NAMES)
     assert _messages(tmp_path / "a") == _messages(tmp_path / "b")
+
+
+def test_the_node_gone_while_the_writer_opens_leaves_a_closed_bag(tmp_path):
+    """The node ends (kill -9, an exception) after sending the open, before the writer's reply: the writer sees the
+    socket closed where it replies and closes the bag as interrupted, quietly (before: a BrokenPipeError traceback and
+    a bag left unclosed, to be recovered)."""
+    import pickle
+    import socket
+    from multiprocessing.connection import Connection
+
+    from gyro_sim.io.bag_process import _CALL
+
+    ours, theirs = socket.socketpair()
+    conn = Connection(ours.detach())
+    conn.send_bytes(pickle.dumps([_CALL + pickle.dumps(
+        ("open", (str(tmp_path / "bag"), "name: x\n", "x", None, None, None, None), {}))]))
+    conn.close()  # (the node gone)
+    p = subprocess.run([sys.executable, "-m", "gyro_sim.io.bag_process", str(theirs.fileno())],
+                       pass_fds=(theirs.fileno(),), capture_output=True, text=True, timeout=120)
+    theirs.close()
+    assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
+    assert bag_info(tmp_path / "bag")["end_reason"] == f"interrupted: {_LOST}"
+

@@ -269,7 +269,10 @@ def _serve(conn: Connection, rec) -> Optional[tuple]:
                     return ("error", "RecordingError", str(exc))
                 return ("closed",)
             if state["failed"] is None and _write(rec, item, state):
-                conn.send_bytes(pickle.dumps(("error", "RecordingError", state["failed"])))
+                try:
+                    conn.send_bytes(pickle.dumps(("error", "RecordingError", state["failed"])))
+                except OSError:  # (the node is gone: the next read sees the socket's end; the bag is closed)
+                    pass
 
 
 def _write(rec, item: bytes, state: dict) -> bool:
@@ -315,8 +318,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except Exception as exc:
         conn.send_bytes(pickle.dumps(("error", type(exc).__name__, str(exc))))
         return 2
-    conn.send_bytes(pickle.dumps(("opened",)))
     try:
+        try:
+            conn.send_bytes(pickle.dumps(("opened",)))
+        except OSError:  # (the node ended before our reply: as at the socket's end, below)
+            rec.interrupted(_LOST)
+            return 0
         reply = _serve(conn, rec)
     finally:
         if not rec.closed:
