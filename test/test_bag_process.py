@@ -181,3 +181,15 @@ def test_the_node_gone_while_the_writer_opens_leaves_a_closed_bag(tmp_path):
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     assert bag_info(tmp_path / "bag")["end_reason"] == f"interrupted: {_LOST}"
 
+
+def test_the_writer_imports_the_nodes_gyro_sim_not_the_working_directorys(tmp_path, monkeypatch):
+    """A node started from a directory holding another gyro_sim (a source checkout beside an installed package,
+    ``ros2 run`` from the repository): its writer runs the node's code (before: ``python -m`` put the working
+    directory first on sys.path; here the writer died on the other package's import, status 1)."""
+    (tmp_path / "gyro_sim").mkdir()
+    (tmp_path / "gyro_sim" / "__init__.py").write_text("raise ImportError('not the node\\'s gyro_sim')\n")
+    monkeypatch.chdir(tmp_path)
+    with BagProcess("bag", "name: x\n", "x") as bp:  # (relative: the node's working directory)
+        bp.write_status(0.0, "x")
+    assert bag_info(tmp_path / "bag")["end_reason"] == "complete"
+

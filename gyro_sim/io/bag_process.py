@@ -1,7 +1,7 @@
 """A bag written by a process of its own: :class:`BagProcess`, :class:`gyro_sim.io.bag_writer.BagRecorder`'s writing
-interface, whose writes are sent over a socket to a child process (``python -m gyro_sim.io.bag_process``) that runs
-the BagRecorder. The simulator node records so in lockstep and freerun (in real time it writes the bag itself, in the
-pacing's idle time).
+interface, whose writes are sent over a socket to a child process (``python -m gyro_sim.io.bag_process``, the node's
+gyro_sim whatever the working directory holds) that runs the BagRecorder. The simulator node records so in lockstep
+and freerun (in real time it writes the bag itself, in the pacing's idle time).
 
 Why: the lockstep tick is a hand-over between two processes. Writing a state sample's seven messages costs ~90 µs
 of Python (the CDR bytes and rosbags' MCAP records); in the node that is on the tick's critical path, and with both
@@ -54,6 +54,10 @@ _ROWS, _ROWS_EULER, _CALL = b"S" + bytes(7), b"E" + bytes(7), b"P"  # (8 bytes: 
 #: exceptions the child's open may raise that are raised again as themselves in the node
 _OPEN_ERRORS = {e.__name__: e for e in (FileExistsError, RecordingError, ValueError, TypeError)}
 _LOST = "the simulator process ended without closing the bag"
+#: the writer process: ``python -m gyro_sim.io.bag_process FD`` with this gyro_sim's code (``-m`` would put the working
+#: directory first on sys.path: a node started beside another gyro_sim, a source checkout, would run that one's writer)
+_CHILD = "import sys; sys.path[0] = sys.argv.pop(1); from gyro_sim.io.bag_process import main; sys.exit(main())"
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 class BagProcess:
@@ -73,7 +77,7 @@ class BagProcess:
         self._batch_wall = 0.0
         ours, theirs = socket.socketpair()
         try:
-            self._proc = subprocess.Popen([sys.executable, "-m", "gyro_sim.io.bag_process", str(theirs.fileno())],
+            self._proc = subprocess.Popen([sys.executable, "-c", _CHILD, _ROOT, str(theirs.fileno())],
                                           pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
                                           start_new_session=True)
         finally:
