@@ -193,3 +193,31 @@ def test_the_writer_imports_the_nodes_gyro_sim_not_the_working_directorys(tmp_pa
         bp.write_status(0.0, "x")
     assert bag_info(tmp_path / "bag")["end_reason"] == "complete"
 
+
+def test_a_bag_that_cannot_be_closed_ends_the_node_with_one_error_line(tmp_path):
+    """The simulator node's writer fails as it closes the bag (here metadata.yaml cannot be written; as a disk
+    that fills in the last writes, which the node hears of at its close): the node says so in one ``error`` line and
+    exits 1, as for a failure mid-run (before: the RecordingError left Loop.run from its ``finally``: a traceback)."""
+    pytest.importorskip("rclpy")
+    from gyro_sim.ros.launch import node_command
+    from gyro_sim.testing import ros_env, unique_domain
+
+    bag = tmp_path / "bag"
+    cmd = node_command("gyro_sim.ros.simulator_node", {
+        "scene": "spinup_thin_shell", "mode": "freerun", "duration": 100000.0, "expect_controller": "false",
+        "progress": "false", "record": str(bag)})
+    p = subprocess.Popen(cmd, env=ros_env(unique_domain()), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and p.poll() is None and not (bag / "bag.mcap").exists():
+            time.sleep(0.05)
+        (bag / "metadata.yaml").mkdir()  # (rosbags writes it last, at the close)
+        p.send_signal(signal.SIGTERM)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 1, err[-3000:]
+    assert "cannot write metadata.yaml" in err and "Traceback" not in err, err[-3000:]

@@ -820,7 +820,10 @@ class Loop:
                     self.show_progress()
                 if self.mode == "realtime":
                     self.wait_wall(r.sim.t / node.live["rate_factor"] - self.run_wall())
-            return self.finish()
+            status = self.finish()
+            if self.recorder is not None:  # (here, not in the finally: a failed close is the except's, as one mid-run;
+                self.recorder.close()  # a BagProcess hears here of a failure in the writes it sent last)
+            return status
         except RecordingError as exc:  # a full disk: the bag is closed with what fit; the run stops
             self.recorder = None
             node.get_logger().error(str(exc))
