@@ -221,3 +221,32 @@ def test_a_bag_that_cannot_be_closed_ends_the_node_with_one_error_line(tmp_path)
             p.wait()
     assert p.returncode == 1, err[-3000:]
     assert "cannot write metadata.yaml" in err and "Traceback" not in err, err[-3000:]
+
+
+def test_an_exception_in_the_node_run_does_not_leave_a_complete_bag(tmp_path):
+    """The simulator node's loop raises (a bug: here its sample publishing, once the run is under way): its bag is
+    closed marked ``interrupted: <the exception>`` (before: ``complete``, a bag cut short that says it is whole)."""
+    pytest.importorskip("rclpy")
+    from gyro_sim.testing import ros_env, unique_domain
+
+    bag = tmp_path / "bag"
+    script = textwrap.dedent(f"""
+        import sys
+        from gyro_sim.ros import simulator_node as m
+        publish = m.Loop.publish_samples
+        def publish_samples(self, rows):
+            if self.runner.sim.t > 0.2:
+                raise RuntimeError("a bug")
+            publish(self, rows)
+        m.Loop.publish_samples = publish_samples
+        sys.argv = ["simulator", "--ros-args", "-p", "scene:=spinup_thin_shell", "-p", "mode:=freerun",
+                    "-p", "duration:=100000.0", "-p", "expect_controller:=false", "-p", "progress:=false",
+                    "-p", "record:={bag}"]
+        sys.exit(m.main())
+        """)
+    p = subprocess.run([sys.executable, "-c", script], env=ros_env(unique_domain()), capture_output=True, text=True,
+                       timeout=180)
+    assert p.returncode == 1 and "RuntimeError: a bug" in p.stderr, p.stderr[-3000:]
+    info = bag_info(bag)
+    assert info["end_reason"] == "interrupted: RuntimeError (a bug)", info["end_reason"]
+    assert 0.2 <= read_bag(bag).t[-1] < 1.0

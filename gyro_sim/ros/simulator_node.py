@@ -829,6 +829,10 @@ class Loop:
             node.get_logger().error(str(exc))
             self.status(f"error: {exc}", warn=True)
             return 1
+        except BaseException as exc:  # (a bug: the bag, cut short, must not say complete)
+            if self.recorder is not None:
+                self.recorder.interrupted(f"{type(exc).__name__}" + (f" ({exc})" if str(exc) else ""))
+            raise
         finally:
             if self.recorder is not None:
                 self.recorder.close()
