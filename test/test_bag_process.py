@@ -250,3 +250,16 @@ def test_an_exception_in_the_node_run_does_not_leave_a_complete_bag(tmp_path):
     info = bag_info(bag)
     assert info["end_reason"] == "interrupted: RuntimeError (a bug)", info["end_reason"]
     assert 0.2 <= read_bag(bag).t[-1] < 1.0
+
+
+def test_no_rows_write_nothing_as_the_recorders_do(tmp_path):
+    """write_samples of a run's arrays with no rows: nothing written, as the BagRecorder (before: ValueError, numpy's
+    reshape of an empty array to (0, -1))."""
+    s = {k: np.zeros((0, w)) for k, w in (("L", 3), ("q", 4), ("omega_b", 3), ("torque", 3), ("current", 3),
+                                           ("rate", 3), ("phase", 3))}
+    s.update(t=np.zeros(0), euler=None)
+    with BagProcess(tmp_path / "b", "name: x\n", "x") as bp:
+        bp.write_samples(s, NAMES)
+        bp.write_status(0.0, "x")
+    assert bag_info(tmp_path / "b")["end_reason"] == "complete"
+    assert read_bag(tmp_path / "b").t.size == 0

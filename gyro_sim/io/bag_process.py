@@ -100,6 +100,8 @@ class BagProcess:
         """Every row of ``s`` (:meth:`BagRecorder.write_samples`; Euler angles None: the writer computes them): its
         numbers in one message."""
         n, eul = s["t"].size, s.get("euler")
+        if not n:  # (nothing to write, as the BagRecorder's loop writes nothing)
+            return
         arrays = [np.asarray(s[k]).reshape(n, -1) for k in _SAMPLE_KEYS]
         if eul is not None:
             arrays.append(np.asarray(eul).reshape(n, -1))
