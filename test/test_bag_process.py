@@ -158,3 +158,108 @@ def test_samples_with_effects_or_other_dtypes_go_as_they_are(tmp_path):
     with BagProcess(tmp_path / "b", "name: x\n", "x") as bp:
         bp.write_samples(s, NAMES)
     assert _messages(tmp_path / "a") == _messages(tmp_path / "b")
+
+
+def test_the_node_gone_while_the_writer_opens_leaves_a_closed_bag(tmp_path):
+    """The node ends (kill -9, an exception) after sending the open, before the writer's reply: the writer sees the
+    socket closed where it replies and closes the bag as interrupted, quietly (before: a BrokenPipeError traceback and
+    a bag left unclosed, to be recovered)."""
+    import pickle
+    import socket
+    from multiprocessing.connection import Connection
+
+    from gyro_sim.io.bag_process import _CALL
+
+    ours, theirs = socket.socketpair()
+    conn = Connection(ours.detach())
+    conn.send_bytes(pickle.dumps([_CALL + pickle.dumps(
+        ("open", (str(tmp_path / "bag"), "name: x\n", "x", None, None, None, None), {}))]))
+    conn.close()  # (the node gone)
+    p = subprocess.run([sys.executable, "-m", "gyro_sim.io.bag_process", str(theirs.fileno())],
+                       pass_fds=(theirs.fileno(),), capture_output=True, text=True, timeout=120)
+    theirs.close()
+    assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
+    assert bag_info(tmp_path / "bag")["end_reason"] == f"interrupted: {_LOST}"
+
+
+def test_the_writer_imports_the_nodes_gyro_sim_not_the_working_directorys(tmp_path, monkeypatch):
+    """A node started from a directory holding another gyro_sim (a source checkout beside an installed package,
+    ``ros2 run`` from the repository): its writer runs the node's code (before: ``python -m`` put the working
+    directory first on sys.path; here the writer died on the other package's import, status 1)."""
+    (tmp_path / "gyro_sim").mkdir()
+    (tmp_path / "gyro_sim" / "__init__.py").write_text("raise ImportError('not the node\\'s gyro_sim')\n")
+    monkeypatch.chdir(tmp_path)
+    with BagProcess("bag", "name: x\n", "x") as bp:  # (relative: the node's working directory)
+        bp.write_status(0.0, "x")
+    assert bag_info(tmp_path / "bag")["end_reason"] == "complete"
+
+
+def test_a_bag_that_cannot_be_closed_ends_the_node_with_one_error_line(tmp_path):
+    """The simulator node's writer fails as it closes the bag (here metadata.yaml cannot be written; as a disk
+    that fills in the last writes, which the node hears of at its close): the node says so in one ``error`` line and
+    exits 1, as for a failure mid-run (before: the RecordingError left Loop.run from its ``finally``: a traceback)."""
+    pytest.importorskip("rclpy")
+    from gyro_sim.ros.launch import node_command
+    from gyro_sim.testing import ros_env, unique_domain
+
+    bag = tmp_path / "bag"
+    cmd = node_command("gyro_sim.ros.simulator_node", {
+        "scene": "spinup_thin_shell", "mode": "freerun", "duration": 100000.0, "expect_controller": "false",
+        "progress": "false", "record": str(bag)})
+    p = subprocess.Popen(cmd, env=ros_env(unique_domain()), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and p.poll() is None and not (bag / "bag.mcap").exists():
+            time.sleep(0.05)
+        (bag / "metadata.yaml").mkdir()  # (rosbags writes it last, at the close)
+        p.send_signal(signal.SIGTERM)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 1, err[-3000:]
+    assert "cannot write metadata.yaml" in err and "Traceback" not in err, err[-3000:]
+
+
+def test_an_exception_in_the_node_run_does_not_leave_a_complete_bag(tmp_path):
+    """The simulator node's loop raises (a bug: here its sample publishing, once the run is under way): its bag is
+    closed marked ``interrupted: <the exception>`` (before: ``complete``, a bag cut short that says it is whole)."""
+    pytest.importorskip("rclpy")
+    from gyro_sim.testing import ros_env, unique_domain
+
+    bag = tmp_path / "bag"
+    script = textwrap.dedent(f"""
+        import sys
+        from gyro_sim.ros import simulator_node as m
+        publish = m.Loop.publish_samples
+        def publish_samples(self, rows):
+            if self.runner.sim.t > 0.2:
+                raise RuntimeError("a bug")
+            publish(self, rows)
+        m.Loop.publish_samples = publish_samples
+        sys.argv = ["simulator", "--ros-args", "-p", "scene:=spinup_thin_shell", "-p", "mode:=freerun",
+                    "-p", "duration:=100000.0", "-p", "expect_controller:=false", "-p", "progress:=false",
+                    "-p", "record:={bag}"]
+        sys.exit(m.main())
+        """)
+    p = subprocess.run([sys.executable, "-c", script], env=ros_env(unique_domain()), capture_output=True, text=True,
+                       timeout=180)
+    assert p.returncode == 1 and "RuntimeError: a bug" in p.stderr, p.stderr[-3000:]
+    info = bag_info(bag)
+    assert info["end_reason"] == "interrupted: RuntimeError (a bug)", info["end_reason"]
+    assert 0.2 <= read_bag(bag).t[-1] < 1.0
+
+
+def test_no_rows_write_nothing_as_the_recorders_do(tmp_path):
+    """write_samples of a run's arrays with no rows: nothing written, as the BagRecorder (before: ValueError, numpy's
+    reshape of an empty array to (0, -1))."""
+    s = {k: np.zeros((0, w)) for k, w in (("L", 3), ("q", 4), ("omega_b", 3), ("torque", 3), ("current", 3),
+                                           ("rate", 3), ("phase", 3))}
+    s.update(t=np.zeros(0), euler=None)
+    with BagProcess(tmp_path / "b", "name: x\n", "x") as bp:
+        bp.write_samples(s, NAMES)
+        bp.write_status(0.0, "x")
+    assert bag_info(tmp_path / "b")["end_reason"] == "complete"
+    assert read_bag(tmp_path / "b").t.size == 0

@@ -1,7 +1,7 @@
 """A bag written by a process of its own: :class:`BagProcess`, :class:`gyro_sim.io.bag_writer.BagRecorder`'s writing
-interface, whose writes are sent over a socket to a child process (``python -m gyro_sim.io.bag_process``) that runs
-the BagRecorder. The simulator node records so in lockstep and freerun (in real time it writes the bag itself, in the
-pacing's idle time).
+interface, whose writes are sent over a socket to a child process (``python -m gyro_sim.io.bag_process``, the node's
+gyro_sim whatever the working directory holds) that runs the BagRecorder. The simulator node records so in lockstep
+and freerun (in real time it writes the bag itself, in the pacing's idle time).
 
 Why: the lockstep tick is a hand-over between two processes. Writing a state sample's seven messages costs ~90 µs
 of Python (the CDR bytes and rosbags' MCAP records); in the node that is on the tick's critical path, and with both
@@ -54,6 +54,10 @@ _ROWS, _ROWS_EULER, _CALL = b"S" + bytes(7), b"E" + bytes(7), b"P"  # (8 bytes: 
 #: exceptions the child's open may raise that are raised again as themselves in the node
 _OPEN_ERRORS = {e.__name__: e for e in (FileExistsError, RecordingError, ValueError, TypeError)}
 _LOST = "the simulator process ended without closing the bag"
+#: the writer process: ``python -m gyro_sim.io.bag_process FD`` with this gyro_sim's code (``-m`` would put the working
+#: directory first on sys.path: a node started beside another gyro_sim, a source checkout, would run that one's writer)
+_CHILD = "import sys; sys.path[0] = sys.argv.pop(1); from gyro_sim.io.bag_process import main; sys.exit(main())"
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 class BagProcess:
@@ -73,7 +77,7 @@ class BagProcess:
         self._batch_wall = 0.0
         ours, theirs = socket.socketpair()
         try:
-            self._proc = subprocess.Popen([sys.executable, "-m", "gyro_sim.io.bag_process", str(theirs.fileno())],
+            self._proc = subprocess.Popen([sys.executable, "-c", _CHILD, _ROOT, str(theirs.fileno())],
                                           pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
                                           start_new_session=True)
         finally:
@@ -96,6 +100,8 @@ class BagProcess:
         """Every row of ``s`` (:meth:`BagRecorder.write_samples`; Euler angles None: the writer computes them): its
         numbers in one message."""
         n, eul = s["t"].size, s.get("euler")
+        if not n:  # (nothing to write, as the BagRecorder's loop writes nothing)
+            return
         arrays = [np.asarray(s[k]).reshape(n, -1) for k in _SAMPLE_KEYS]
         if eul is not None:
             arrays.append(np.asarray(eul).reshape(n, -1))
@@ -269,7 +275,10 @@ def _serve(conn: Connection, rec) -> Optional[tuple]:
                     return ("error", "RecordingError", str(exc))
                 return ("closed",)
             if state["failed"] is None and _write(rec, item, state):
-                conn.send_bytes(pickle.dumps(("error", "RecordingError", state["failed"])))
+                try:
+                    conn.send_bytes(pickle.dumps(("error", "RecordingError", state["failed"])))
+                except OSError:  # (the node is gone: the next read sees the socket's end; the bag is closed)
+                    pass
 
 
 def _write(rec, item: bytes, state: dict) -> bool:
@@ -315,8 +324,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except Exception as exc:
         conn.send_bytes(pickle.dumps(("error", type(exc).__name__, str(exc))))
         return 2
-    conn.send_bytes(pickle.dumps(("opened",)))
     try:
+        try:
+            conn.send_bytes(pickle.dumps(("opened",)))
+        except OSError:  # (the node ended before our reply: as at the socket's end, below)
+            rec.interrupted(_LOST)
+            return 0
         reply = _serve(conn, rec)
     finally:
         if not rec.closed:

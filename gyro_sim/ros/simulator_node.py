@@ -820,12 +820,19 @@ class Loop:
                     self.show_progress()
                 if self.mode == "realtime":
                     self.wait_wall(r.sim.t / node.live["rate_factor"] - self.run_wall())
-            return self.finish()
+            status = self.finish()
+            if self.recorder is not None:  # (here, not in the finally: a failed close is the except's, as one mid-run;
+                self.recorder.close()  # a BagProcess hears here of a failure in the writes it sent last)
+            return status
         except RecordingError as exc:  # a full disk: the bag is closed with what fit; the run stops
             self.recorder = None
             node.get_logger().error(str(exc))
             self.status(f"error: {exc}", warn=True)
             return 1
+        except BaseException as exc:  # (a bug: the bag, cut short, must not say complete)
+            if self.recorder is not None:
+                self.recorder.interrupted(f"{type(exc).__name__}" + (f" ({exc})" if str(exc) else ""))
+            raise
         finally:
             if self.recorder is not None:
                 self.recorder.close()
