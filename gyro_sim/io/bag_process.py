@@ -13,9 +13,10 @@ The child writes what it is sent in order: the bag is the BagRecorder's, message
 disk: :class:`RecordingError`) reach the node at its next send or at :meth:`BagProcess.close`. It ignores SIGINT,
 SIGTERM and SIGHUP and runs in a session of its own: the node decides how the bag ends (``interrupted``, ``close``).
 If the node ends without closing it (kill -9), the child sees the socket close and closes the bag with what it was
-sent, ``gyro_sim.end`` = ``interrupted: the simulator process ended without closing the bag``: at most the last
-:data:`BATCH_WALL` s of writes are lost. A socket buffer's worth of writes (~200 kB) can wait for the child; beyond,
-a send waits for it (memory stays flat).
+sent, ``gyro_sim.end`` = ``interrupted: the simulator process ended without closing the bag``: the writes queued
+since the last send are lost (a send comes with a write, or the node's pump, once the oldest queued write is
+:data:`BATCH_WALL` s old: normally the last 50 ms). A socket buffer's worth of writes (~200 kB) can wait for the
+child; beyond, a send waits for it (memory stays flat).
 
 ``GYRO_SIM_WRITER_CPUS`` (comma-separated CPU numbers; :func:`gyro_sim.ros.launch.writer_cpus_env` sets it where the
 launcher holds the nodes to one CPU): the CPUs the child may use.
