@@ -187,12 +187,15 @@ def _epow(E, k):
 
 @njit(cache=True)
 def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end,
-               out, K1):
+               out, K1, precess=True):
     """One pass of the step with L̄ = (Lx, Ly, Lz) (case): out[0:3] = ∫N ds, out[3:6] = ∫(h − s)N ds,
     out[6:10] = the attitude quaternion at s = h; E_end (nm, 3) complex receives the oscillating part of
     each mode at s = h. ``R`` is R0 (body → case), ``A`` (P, 3) the case phasors a_p = (Bre − iBim)e^{iν s},
     EO (P,) = e^{iν_p h}. Every exponential of the step is a product of e^{iν_p h}, e^{iΩ_p h}, e^{iΩ_r h}
-    and e^{−h/τ_n} (EZ[k] = e^{Z[k] h}): a few exp calls a pass, not three per term."""
+    and e^{−h/τ_n} (EZ[k] = e^{Z[k] h}): a few exp calls a pass, not three per term. ``precess`` False: K1 is not
+    made and out[15] takes ∫(h − s)N along e_a without the precession's part (K1's): a pass whose K1 and out[15]
+    serve only Ω_r = (1/J_a − 1/J_t) L̄_a, which is zero for an isotropic body whatever L̄_a (its first two
+    passes: two thirds of their ∫ terms, the same bits)."""
     P = om.shape[0]
     Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
     xa0, xa1, xa2 = R[0, ax], R[1, ax], R[2, ax]  # symmetry axis in the case frame
@@ -279,6 +282,8 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
             for sg in range(2):
                 a0, a1, a2, zq, ezq = _field_half(A, q, sg, Z[j], EZ[j], om[q], EO[q])
                 n0, n1, n2 = _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out)
+                if not precess:
+                    continue
                 # N = ½ Σ (n e^{zs} + conj): each half times e^{−iΩ_p s}
                 k1, m1 = _integrals(zq - 1j * Op, ezq * Ep.conjugate(), h)
                 k2, m2 = _integrals(zq.conjugate() - 1j * Op, (ezq * Ep).conjugate(), h)
@@ -309,6 +314,9 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     out[13], out[14] = Op, Or
     # the mean over the step of L_b·e_a (what sets Ω_r): L_b0 + R0ᵀ ∫(h − s) Rot(l̂, −Ω_p s) N ds / h, along e_a
     g0, g1, g2 = _proj(0, l0, l1, l2, out[3] + 0j, out[4] + 0j, out[5] + 0j)
+    if not precess:  # (only Ω_r = 0 · L̄_a reads it: L̄_a's part along l̂, its sign that of the whole)
+        out[15] = y[0] * xa0 + y[1] * xa1 + y[2] * xa2 + (xa0 * g0.real + xa1 * g1.real + xa2 * g2.real) / h
+        return
     k0, k1, k2 = _proj(1, l0, l1, l2, K1[1, 0], K1[1, 1], K1[1, 2])
     out[15] = (y[0] * xa0 + y[1] * xa1 + y[2] * xa2
                + (xa0 * (g0.real + 2.0 * k0.real) + xa1 * (g1.real + 2.0 * k1.real)
@@ -336,11 +344,13 @@ def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A
     R[2, 1] = 2 * (q2 * q3 + q0 * q1)
     R[2, 2] = 1 - 2 * (q1 * q1 + q2 * q2)
     Lx, Ly, Lz = y[0], y[1], y[2]
+    # (an isotropic body's first two passes need no K1: they serve only its Ω_r, which is zero)
+    pre = Ja != Jt
     _flow_pass(Lx, Ly, Lz, math.nan, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S,
-               E_end, out, K1)
+               E_end, out, K1, pre)
     a0, a1, a2, la1 = out[3], out[4], out[5], out[15]
     _flow_pass(Lx + a0 / h, Ly + a1 / h, Lz + a2 / h, la1, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam,
-               w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1)
+               w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1, pre)
     # third pass at the mean of L right to O(h³): (I2_1 + 2 I2_2)/(3h) (the first pass, frozen at L0, misses
     # J_N N̄ h³/6 of ∫(h − s)N ds, the second, frozen at L0 + I2_1/h, has J_N N̄ h³/12 too much); the mean axial
     # moment alike. The flow's phases ∫Ω_p, ∫Ω_r then come from a mean right to third order: the spin and
