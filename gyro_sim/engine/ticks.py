@@ -369,10 +369,12 @@ class TickLoop:
 
     def _log(self, times: np.ndarray, cur: np.ndarray, rate: np.ndarray) -> None:
         """The commands of the ticks whose law changed nothing, in the runner's log as apply_commands writes them."""
+        names = self.names
+        if not names:  # (a law that commands no stator, 'hold': nothing applied, nothing logged, as apply_commands)
+            return
         cs, rs = cur.tolist(), rate.tolist()
         if self.kind == law_kernels.OFF:  # (the one law with a field left unchanged: its rates)
             rs = [[None if v != v else v for v in row] for row in rs]
-        names = self.names
         self.r.command_log.extend((t, list(names), c, v) for t, c, v in zip(times.tolist(), cs, rs))
 
 
