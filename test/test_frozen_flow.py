@@ -222,7 +222,7 @@ def test_an_isotropic_body_skips_the_precession_integrals_of_its_first_passes_wi
                                  rng.normal(size=3 * nm) * 1e-3])
             k = 9 * (P + nm)
 
-            def work():
+            def work(P=P, k=k, nm=nm):
                 return (np.empty((P, 3), np.complex128), np.empty((k, 3), np.complex128), np.empty(k, np.complex128),
                         np.empty(k, np.complex128), np.empty(P, np.complex128), np.empty((nm, 3), np.complex128),
                         np.empty((nm, 3), np.complex128), np.empty(16), np.empty((3, 3)),
