@@ -36,6 +36,7 @@ from typing import Any, Literal, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from gyro_sim.io.bag_writer import RecordingError
+from gyro_sim.io.signals import interrupt_reason, signal_name
 
 __all__ = ["BagProcess", "WRITER_CPUS_ENV"]
 
@@ -165,8 +166,8 @@ class BagProcess:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> Literal[False]:
-        if exc_type is not None and self._conn is not None:
-            self.interrupted(f"{exc_type.__name__}" + (f" ({exc})" if str(exc) else ""))
+        if exc is not None and self._conn is not None:
+            self.interrupted(interrupt_reason(exc))
         self.close()
         return False
 
@@ -235,7 +236,7 @@ class BagProcess:
 
     def _status(self) -> str:
         code = self._proc.wait()
-        return f"status {code}" if code >= 0 else f"signal {signal.Signals(-code).name}"
+        return f"status {code}" if code >= 0 else f"signal {signal_name(-code)}"
 
     def _end_child(self) -> None:
         conn, self._conn = self._conn, None

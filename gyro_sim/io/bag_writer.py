@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 import os
 import shutil
-import signal
 import threading
 import time
 from pathlib import Path
@@ -25,7 +24,7 @@ from gyro_sim.io.messages import (
 )
 from gyro_sim.io.cdr_template import NUMBER_PATHS, STAMP_PATHS, Template
 from gyro_sim.physics.frames import euler_angles, quat_to_matrix
-from gyro_sim.io.signals import RunInterrupted, _held_signals, _signals_deferred
+from gyro_sim.io.signals import _held_signals, _signals_deferred, interrupt_reason
 
 if TYPE_CHECKING:  # pragma: no cover
     from gyro_sim.engine.simulate import RunResult
@@ -348,12 +347,8 @@ class BagRecorder:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> Literal[False]:
-        if isinstance(exc, RunInterrupted):  # (the words the simulator node uses too)
-            self._end = f"interrupted: signal {signal.Signals(exc.signum).name}"
-        elif isinstance(exc, KeyboardInterrupt):
-            self._end = "interrupted: signal SIGINT"
-        elif exc_type is not None:
-            self._end = f"interrupted: {exc_type.__name__}" + (f" ({exc})" if str(exc) else "")
+        if exc is not None:  # (the words the simulator node uses too)
+            self._end = f"interrupted: {interrupt_reason(exc)}"
         self.close()
         return False
 

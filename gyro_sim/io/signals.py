@@ -6,9 +6,9 @@ from __future__ import annotations
 import signal
 import threading
 from contextlib import contextmanager
-from typing import Iterator
+from typing import Iterator, Optional
 
-__all__ = ["RunInterrupted", "exit_status", "sigterm_as_interrupt"]
+__all__ = ["RunInterrupted", "exit_status", "sigterm_as_interrupt", "signal_name", "interrupt_reason"]
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -22,6 +22,26 @@ class RunInterrupted(KeyboardInterrupt):
     @property
     def exit_status(self) -> int:
         return 128 + self.signum
+
+
+def signal_name(signum: Optional[int]) -> str:
+    """'SIGINT' for 2 (the number for a signal without a name; 'stop' for None)."""
+    if signum is None:
+        return "stop"
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return f"signal {signum}"
+
+
+def interrupt_reason(exc: BaseException) -> str:
+    """What a bag's end says after ``interrupted: `` of a run that ``exc`` ended: ``signal SIGTERM`` (a
+    :class:`RunInterrupted`), ``signal SIGINT`` (Ctrl-C's KeyboardInterrupt), else its type and message."""
+    if isinstance(exc, RunInterrupted):
+        return f"signal {signal_name(exc.signum)}"
+    if isinstance(exc, KeyboardInterrupt):
+        return "signal SIGINT"
+    return type(exc).__name__ + (f" ({exc})" if str(exc) else "")
 
 
 def exit_status(exc: BaseException) -> int:

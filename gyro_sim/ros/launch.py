@@ -43,6 +43,8 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
+from gyro_sim.io.signals import signal_name  # noqa: F401 (re-exported: gyro_sim.ros.common, replay)
+
 #: SIGINT/SIGTERM: what stops the nodes (and ``gyro-sim run --ros``) cleanly
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # (SIGHUP: the terminal closed; 129)
 #: the signal the launcher sends the simulator when the controller's process ended with an error while the run goes on
@@ -55,16 +57,6 @@ STOP_GRACE = 30.0  # wall s the simulator has, after a forwarded signal, to clos
 CONTROLLER_GRACE = 10.0  # wall s the controller has to end after SIGINT/SIGTERM before SIGKILL
 POLL = 0.05  # wall s between looks at the nodes while waiting
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
-
-
-def signal_name(signum: Optional[int]) -> str:
-    """'SIGINT' for 2 (the number for a signal without a name; 'stop' for None)."""
-    if signum is None:
-        return "stop"
-    try:
-        return signal.Signals(signum).name
-    except ValueError:
-        return f"signal {signum}"
 
 
 def ros_env(domain_id: Optional[int] = None) -> dict:

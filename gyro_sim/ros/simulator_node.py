@@ -59,6 +59,7 @@ from gyro_sim.compiled.compile_watch import announce_compiles, compile_seconds
 from gyro_sim.engine.faults import FaultConfig, Faults
 from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.io.recording import STREAM_BUFFER_ROWS, RecordingError
+from gyro_sim.io.signals import interrupt_reason
 from gyro_sim.engine.simulate import Runner, controller_period
 from gyro_sim.ros.common import (MessageWait, exit_status, make_executor, message_class, node_main, parse_command,
                                  qos_profile, signal_name, take, wait_for_matches)
@@ -831,7 +832,7 @@ class Loop:
             return 1
         except BaseException as exc:  # (a bug: the bag, cut short, must not say complete)
             if self.recorder is not None:
-                self.recorder.interrupted(f"{type(exc).__name__}" + (f" ({exc})" if str(exc) else ""))
+                self.recorder.interrupted(interrupt_reason(exc))
             raise
         finally:
             if self.recorder is not None:
