@@ -90,11 +90,11 @@ def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
     """The scene's controller node and the simulator node (``sim_args``: more ``-p name:=value``) as processes on a
     free domain, on CPUs as ``gyro-sim run --ros`` runs them by default (:data:`NODE_CPU`); the simulator
     waits for the controller's two subscriptions. Returns the simulator's result."""
-    from gyro_sim.ros.launch import node_cpus, writer_cpus_env
+    from gyro_sim.ros.launch import node_cpus, node_preexec, writer_cpus_env
 
     cpus = node_cpus(NODE_CPU, "realtime" if "mode:=realtime" in sim_args else "lockstep")
     env = {**_env(), **writer_cpus_env(cpus)}
-    pin = (lambda: os.sched_setaffinity(0, cpus)) if cpus else None
+    pin = node_preexec(cpus)  # (as the launcher starts them: held to its CPUs, ended with this process)
     ctl = subprocess.Popen([sys.executable, "-m", "gyro_ctl.ros.controller_node", "--ros-args", "-p",
                             f"scene:={scene}"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                            preexec_fn=pin)
