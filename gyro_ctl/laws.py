@@ -162,9 +162,9 @@ def law_form(p) -> tuple[int, np.ndarray, list | None, list]:
 class CompiledLaw:
     """A built-in law with its limits as one call of :func:`gyro_ctl.law_kernels.law_commands`:
     ``law(x: ControlInput) -> Commands``, as the ROS controller node and Python callers use it. The attributes
-    (``kind``, ``fp``, ``current_limit``, ``rate_limit``: NaN = none; ``needs_time``, ``reads_state``: whether the
-    commands depend on the time, on the time or the state) are what a compiled tick loop passes to the same kernel
-    (gyro_sim.ticks)."""
+    (``kind``, ``fp``, ``current_limit``, ``rate_limit``: NaN = none; ``needs_time``, ``reads_state``, ``reads_L``:
+    whether the commands depend on the time, on the time or the state, on the kinetic moment) are what a compiled
+    tick loop passes to the same kernel (gyro_sim.ticks) and what the controller node subscribes to."""
 
     def __init__(self, params, current_limit: float | None = None, rate_limit: float | None = None):
         self.kind, self.fp, self._names, self._control = law_form(params)
@@ -173,6 +173,7 @@ class CompiledLaw:
         # commands of the others are the same at every tick
         self.needs_time = self.kind == lk.SPINUP and self.fp[1] == self.fp[1]
         self.reads_state = self.needs_time or self.kind == lk.PSI_SWITCHING
+        self.reads_L = self.kind == lk.PSI_SWITCHING  # (the kinetic moment: ψ-switching's alone)
 
     def command_names(self, stator_names) -> list:
         """The stators the law commands, in order (of ``stator_names``, the scene's, for law ``off``)."""
@@ -192,6 +193,13 @@ class CompiledLaw:
                         np.ascontiguousarray(x.q, dtype=float), self.control_axes(x.stator_names, x.stator_axes),
                         self.fp, self.current_limit, self.rate_limit, cur, rate)
         return dict(zip(names, zip(_optional(cur), _optional(rate))))
+
+
+def reads_L(law: Callable[[ControlInput], Commands]) -> bool:
+    """Whether ``law`` (as :func:`make_law` gives it) reads the kinetic moment ``x.L``: of the compiled laws only
+    ψ-switching does (the others read the time at most); a Python law may, so it counts as reading it. A caller
+    that knows it does not may pass any L (e.g. zeros): the commands are the same."""
+    return getattr(law, "reads_L", True)
 
 
 def limited(commands: Commands, current_limit: float | None, rate_limit: float | None) -> Commands:

@@ -207,3 +207,63 @@ def test_bad_parameters_at_start_up_are_refused(ros, params, reason):
     assert code == 2
     errors = [ln for ln in out.splitlines() if "controller: error:" in ln]
     assert len(errors) == 1 and reason in errors[0], out
+
+
+SUBS_SCRIPT = r"""
+import json, sys
+import rclpy
+from gyro_ctl.ros.controller_node import ControllerNode
+from gyro_sim.io.messages import TOPIC_KINETIC_MOMENT, node_topic
+from rclpy.parameter import Parameter
+
+rclpy.init(args=["ctl", "--ros-args", "-p", "scene:=" + sys.argv[1]])
+node = ControllerNode()
+sent = []
+node.pub.publish = lambda m: sent.append(m)  # (the commands the node publishes, seen here)
+L_topic = node.get_namespace().rstrip("/") + "/" + node_topic(TOPIC_KINETIC_MOMENT)
+
+
+def seen():
+    return {"kinds": list(node.kinds), "subs": sorted(node.subs), "L_subscribers": node.count_subscribers(L_topic)}
+
+
+out = {"start": seen()}
+psi = {"law": "psi_switching", "control_stators": ["z1", "z2"], "spin_stator": "z3", "nu": [3000.0, 5000.0],
+       "control_current": 0.3, "spin_current": 0.5, "spin_rate": 200.0}
+r = node.set_parameters_atomically([Parameter(k, value=v) for k, v in psi.items()])
+out["switch_ok"], out["resubscribe"] = r.successful, node.resubscribe
+node.subscribe()
+out["psi"] = seen()
+imu = [0, 20_000_000, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 3000.0]  # stamp 0.02 s, q = 1, Ω_b along x3
+node._on(imu, "imu")  # half of a state: ψ-switching waits for its L
+out["answered_half"], out["half"] = len(sent), node.half
+r = node.set_parameters_atomically([Parameter("law", value="spinup")])
+node.subscribe()  # the switch back: the waiting state is answered at once (a lockstep simulator waits for it)
+out["spinup"], out["answered_after"], out["pending"] = seen(), len(sent), len(node.pending)
+print(json.dumps(out))
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+def test_the_controller_subscribes_to_L_only_where_its_law_reads_it(ros):
+    """Spin-up reads no kinetic moment: the controller subscribes to gyro/imu alone, so the simulator publishes one
+    state message a tick instead of two (before: gyro/kinetic_moment too, whatever the law). A switch to
+    ψ-switching subscribes to it; a state half in at a switch back is answered at once."""
+    code, text = finish(ros.start("-c", SUBS_SCRIPT, "spinup_thin_shell"), 120)
+    assert code == 0, text
+    out = json.loads(text.strip().splitlines()[-1])
+    assert out["start"] == {"kinds": ["imu"], "subs": ["imu"], "L_subscribers": 0}, out["start"]
+    assert out["switch_ok"] and out["resubscribe"]
+    assert out["psi"] == {"kinds": ["imu", "L"], "subs": ["L", "imu"], "L_subscribers": 1}, out["psi"]
+    assert out["answered_half"] == 0 and out["half"]
+    assert out["spinup"]["subs"] == ["imu"] and out["spinup"]["L_subscribers"] == 0, out["spinup"]
+    assert out["answered_after"] == 1 and out["pending"] == 0
+
+
+def test_psi_switching_scene_subscribes_to_both(ros):
+    """ψ-switching reads L and the attitude: both state topics from the start."""
+    code, text = finish(ros.start("-c", SUBS_SCRIPT, "nutation_oblate"), 120)
+    assert code == 0, text
+    out = json.loads(text.strip().splitlines()[-1])
+    assert out["start"] == {"kinds": ["imu", "L"], "subs": ["L", "imu"], "L_subscribers": 1}, out["start"]

@@ -1,6 +1,7 @@
 """Lockstep that holds under load (issue 30): a result that does not depend on the machine's load or on any
 wall-clock timeout, a lost controller that fails the run, wrong stamps refused at once, a controller that ends
 with the run. Real node processes over DDS, each test on its own ROS domain (see test_ros.py)."""
+import json
 import subprocess
 import sys
 import time
@@ -125,3 +126,40 @@ def test_done_line_without_commands_has_no_nan(ros, tmp_path):
     print(f"\n  {done[:160]}")
     assert "nan" not in done and "no command latency" in done
     assert not any(k.startswith("gyro_sim.latency") for k in bag_info(bag)["custom"])
+
+
+def test_a_law_switch_mid_run_subscribes_and_goes_on(ros, tmp_path):
+    """Spin-up reads no L (the controller subscribes to gyro/imu alone); a switch to ψ-switching mid-run subscribes
+    to gyro/kinetic_moment, and the lockstep run goes on: the next tick waits until the simulator publishes L to the
+    new subscription, every tick is answered (no controller lost), the ticks before the switch by spin-up (z3
+    alone), those after it by ψ-switching (z1, z2 and z3). The switch happens while the run is paused at 0.4 s."""
+    bag = tmp_path / "switch"
+    sim = ros.simulator(scene="spinup_thin_shell", duration=1.0, record=bag, start_paused=True, step_ticks=20,
+                        startup_timeout=120.0, controller_timeout=30.0)
+    ros.controller(scene="spinup_thin_shell")
+    p1 = ros.start(PROBE, "script", str(tmp_path / "p1.json"), "/", str(PROBE_WINDOW), json.dumps(
+        [{"wait_status": "paused at t = 0 s"}, {"call": "step"}, {"wait_status": "paused at t = 0.4 s"}]))
+    code, text = finish(p1)
+    assert code == 0 and "error" not in (tmp_path / "p1.json").read_text(), text
+    psi = {"law": "psi_switching", "control_stators": ["z1", "z2"], "spin_stator": "z3", "nu": [3000.0, 5000.0],
+           "control_current": 0.3, "spin_current": 0.5, "spin_rate": 200.0}
+    p2 = ros.start(PROBE, "params", str(tmp_path / "p2.json"), str(PROBE_WINDOW), "gyro_controller",
+                   json.dumps([{"set_atomically": psi}]))
+    code, text = finish(p2)
+    answers = json.loads((tmp_path / "p2.json").read_text())["answers"]
+    assert code == 0 and answers[0]["successful"], (text, answers)
+    ros.start(PROBE, "script", str(tmp_path / "p3.json"), "/", str(PROBE_WINDOW), json.dumps(
+        [{"call": "resume"}, {"wait_status": "done:"}]))
+    code, out = finish(sim)
+    assert code == 0, out
+    b = read_bag(bag)
+    lost = [s for s in b.status if s.startswith(("controller lost", "watchdog"))]
+    assert not lost, lost
+    commanded = ~np.isnan(b.command_current)  # (m, 3): z1 z2 z3
+    before, after = b.command_t < 0.4 + 1e-9, b.command_t > 0.4 + 1e-9
+    ticks = np.round(b.command_t / 0.02).astype(int)
+    print(f"\n  {before.sum()} commands before the switch, {after.sum()} after; stators after: "
+          f"{sorted(set(map(tuple, commanded[after].tolist())))}")
+    assert commanded[before].tolist() == [[False, False, True]] * int(before.sum())
+    assert after.any() and commanded[after][:, :2].all()
+    assert sorted(set(ticks.tolist())) == list(range(0, 50)), ticks  # a command at every tick 0 … 0.98 s

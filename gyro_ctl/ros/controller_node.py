@@ -1,8 +1,11 @@
 """ROS 2 controller node: runs a law of :mod:`gyro_ctl.laws` on the simulator's published state.
 
-Subscribes ``/gyro/imu`` (attitude, body rates) and ``/gyro/kinetic_moment`` (L, case frame); for each
-stamp at which both have arrived it evaluates the law and publishes ``/gyro/stator_commands`` with that
-stamp (lockstep simulators wait for exactly that stamp). The law and its parameters come from the
+Subscribes ``/gyro/imu`` (attitude, body rates) and, while its law reads it, ``/gyro/kinetic_moment`` (L, case
+frame: ψ-switching and the Python laws; :func:`gyro_ctl.laws.reads_L`); for each stamp at which those have arrived
+it evaluates the law and publishes ``/gyro/stator_commands`` with that stamp (lockstep simulators wait for exactly
+that stamp). A law that does not read L leaves the topic unsubscribed, and the simulator then does not publish
+it: one message fewer a tick (a switch to a law that reads it subscribes again; its first answer waits for the
+simulator to see the subscription, at most about half a second in lockstep). The law and its parameters come from the
 scene's ``controller`` section and can be overridden by ROS parameters (also at run time with
 ``ros2 param set``); a value that does not validate, a stator the scene does not have, or a parameter
 of a law not in force is refused with the reason. The parameters always show what is in force.
@@ -36,7 +39,7 @@ from gyro_sim.engine.simulate import stator_triad
 
 from ..config import LAW_NAMES, ControllerConfig, PsiSwitchingParams, SpinupParams, unknown_stators
 from .. import law_kernels
-from ..laws import ControlInput, make_law
+from ..laws import ControlInput, make_law, reads_L
 
 #: the laws whose parameters are ROS parameters (the others take theirs from the scene's controller section)
 ROS_LAWS = {"spinup": SpinupParams, "psi_switching": PsiSwitchingParams}
@@ -221,30 +224,26 @@ class ControllerNode(Node):
         st = self.scene.stators
         self.names = tuple(s.name for s in st)
         self.axes = np.array([stator_triad(s.axis)[2] for s in st]).reshape(-1, 3)
+        self.pending: dict[int, dict] = {}  # stamp (ns) → {kind: numbers} of the states not yet answered
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
-        self.pending: dict[int, dict] = {}
         self._command_class = message_class(TOPICS[TOPIC_STATOR_COMMANDS])
         self.pub = self.create_publisher(message_class(TOPICS[TOPIC_STATOR_COMMANDS]), node_topic(TOPIC_STATOR_COMMANDS),
                                          qos_profile(TOPIC_STATOR_COMMANDS))
-        self.subs = {}
-        self.subs["imu"] = self.create_subscription(message_class(TOPICS[TOPIC_IMU]), node_topic(TOPIC_IMU),
-                                                    lambda m: self._on(state_numbers(m, "imu"), "imu"),
-                                                    qos_profile(TOPIC_IMU))
-        self.subs["L"] = self.create_subscription(message_class(TOPICS[TOPIC_KINETIC_MOMENT]),
-                                                  node_topic(TOPIC_KINETIC_MOMENT),
-                                                  lambda m: self._on(state_numbers(m, "L"), "L"),
-                                                  qos_profile(TOPIC_KINETIC_MOMENT))
+        self.subs: dict = {}  # kind ('imu', 'L') → subscription, of the kinds the law reads (:meth:`subscribe`)
+        self.kinds: tuple = ()
+        self.resubscribe = False  # set when a law switch changes the kinds read: the loop calls subscribe()
+        self.subscribe()
         self.answered = 0  # commands published (a done: line before the first is an earlier run's: ignored)
-        self.half = False  # the last state message taken waits for the other of its stamp
-        self.last_kind: Optional[str] = None  # the kind whose message completed the last pair
+        self.half = False  # the last state message taken waits for another of its stamp
+        self.last_kind: Optional[str] = None  # the kind whose message completed the last stamp
         self.finished = False  # the simulator's run is done (and keep_alive is false): the loop ends
         self.status_sub = self.create_subscription(message_class(TOPICS[TOPIC_STATUS]), node_topic(TOPIC_STATUS),
                                                    self._on_status, qos_profile(TOPIC_STATUS))
         # states taken and commands published as CDR bytes where rosbags' and rclpy's serializations agree
         # (gyro_sim.ros.wire: rclpy's Python message objects cost more than the law)
-        self.wire = Wire({TOPIC_IMU: self.subs["imu"].msg_type, TOPIC_KINETIC_MOMENT: self.subs["L"].msg_type,
-                          TOPIC_STATOR_COMMANDS: self._command_class})
+        self.wire = Wire({t: message_class(TOPICS[t]) for t in (TOPIC_IMU, TOPIC_KINETIC_MOMENT)}
+                         | {TOPIC_STATOR_COMMANDS: self._command_class})
         self.serialized = {kind: self.wire.serialized(t) for kind, t in _TOPIC.items()}
         self.wire.serialized(TOPIC_STATOR_COMMANDS)  # (checked now, not at the first command)
         # the simulator's state messages read at fixed places (gyro_sim.ros.wire.Template; others decoded whole)
@@ -275,8 +274,44 @@ class ControllerNode(Node):
         cfg, self._next = self._next, None
         if cfg != self.cfg:
             self.cfg, self.law = cfg, make_law(cfg)
+            self.resubscribe = self.kinds != self.law_kinds()
             self.get_logger().info(f"controller: now law {cfg.law} with {cfg.params.model_dump(exclude={'law'})}")
         self._show(cfg)
+
+    # --- the state subscriptions -------------------------------------------------------------
+    def law_kinds(self) -> tuple:
+        """The state messages the law in force needs at each stamp: ('imu', 'L') where it reads the kinetic moment
+        (:func:`gyro_ctl.laws.reads_L`), else ('imu',) (the stamp, the attitude and the body rates)."""
+        return ("imu", "L") if reads_L(self.law) else ("imu",)
+
+    def subscribe(self) -> None:
+        """Subscribe to the state topics the law in force needs and to no other (:meth:`law_kinds`): the simulator
+        publishes a per-sample topic only to subscribers. Called at start-up and by the loop after a law switch
+        that changes them (with no wait on the subscriptions in progress)."""
+        self.resubscribe = False
+        self.kinds = self.law_kinds()
+        topics = {"imu": TOPIC_IMU, "L": TOPIC_KINETIC_MOMENT}
+        for kind, topic in topics.items():
+            if kind in self.kinds and kind not in self.subs:
+                self.subs[kind] = self.create_subscription(
+                    message_class(TOPICS[topic]), node_topic(topic),
+                    lambda m, kind=kind: self._on(state_numbers(m, kind), kind), qos_profile(topic))
+            elif kind not in self.kinds and kind in self.subs:
+                self.destroy_subscription(self.subs.pop(kind))
+        self.half = False
+        self.last_kind = None
+        self.answer_pending()
+
+    def answer_pending(self) -> None:
+        """Answer the latest pending stamp that has every kind now needed (after a switch to a law that needs fewer:
+        a lockstep simulator waits for it), dropping the older ones."""
+        done = [k for k, e in self.pending.items() if all(kind in e for kind in self.kinds)]
+        if done:
+            key = max(done)
+            entry = self.pending[key]
+            for k in [k for k in self.pending if k <= key]:
+                del self.pending[k]
+            self._answer(key, entry)
 
     def _show(self, cfg: ControllerConfig) -> None:
         """Set law and the law parameters to what is in force (the other laws' parameters to their unset value)."""
@@ -315,11 +350,12 @@ class ControllerNode(Node):
         return numbers if numbers is not None else state_numbers(self.wire.decode(_TOPIC[kind], raw), kind)
 
     def _on(self, numbers: list, kind: str) -> None:
-        """One state message's numbers (:func:`state_numbers`); with both of a stamp, the law's command for it."""
+        """One state message's numbers (:func:`state_numbers`); with every kind the law needs of a stamp
+        (:attr:`kinds`), the law's command for it."""
         key = numbers[0] * 1_000_000_000 + numbers[1]
         entry = self.pending.setdefault(key, {})
         entry[kind] = numbers
-        self.half = len(entry) < 2
+        self.half = not all(k in entry for k in self.kinds)
         if self.half:
             if len(self.pending) > 1000:  # never grow without bound on a lost message
                 for k in sorted(self.pending)[:500]:
@@ -327,7 +363,13 @@ class ControllerNode(Node):
             return
         del self.pending[key]
         self.last_kind = kind
-        imu, Lm = entry["imu"], entry["L"]
+        self._answer(key, entry)
+
+    def _answer(self, key: int, entry: dict) -> None:
+        """Publish the law's command for the state of stamp ``key`` (ns) from its messages' numbers ``entry``
+        ({kind: :func:`state_numbers`}; without 'L' the law does not read it: zeros stand in)."""
+        imu = entry["imu"]
+        Lm = entry.get("L", _NO_L)
         x = ControlInput(t=key * 1e-9, L=np.array(Lm[2:5]), q=np.array([imu[5], imu[2], imu[3], imu[4]]),
                          omega_b=np.array(imu[6:9]), stator_names=self.names, stator_axes=self.axes)
         cmds = self.law(x)
@@ -356,6 +398,9 @@ class ControllerNode(Node):
 
 #: the state subscriptions' kinds and topics
 _TOPIC = {"imu": TOPIC_IMU, "L": TOPIC_KINETIC_MOMENT}
+
+#: the numbers of a kinetic moment a law that does not read it gets (:func:`state_numbers`' order: no stamp, L = 0)
+_NO_L = [0, 0, 0.0, 0.0, 0.0]
 
 
 def state_numbers(msg, kind: str) -> list:
@@ -415,6 +460,11 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
     next_pump = 0.0
     try:
         while not stop.is_set() and rclpy.ok() and not node.finished:
+            if node.resubscribe:  # a law switch changed the state it reads (no wait on the subscriptions now)
+                waiter.close()
+                node.subscribe()
+                kinds = list(node.subs)
+                waiter = MessageWait(node, [node.subs[k] for k in kinds], period=PUMP_PERIOD)
             for kind in kinds:
                 while True:  # every message that came
                     msg = node.take(kind)

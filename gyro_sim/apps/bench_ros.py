@@ -89,7 +89,8 @@ def first_run(scene: str, tmp: Path) -> list[dict]:
 def closed_loop(scene: str, sim_args: list) -> subprocess.CompletedProcess:
     """The scene's controller node and the simulator node (``sim_args``: more ``-p name:=value``) as processes on a
     free domain, on CPUs as ``gyro-sim run --ros`` runs them by default (:data:`NODE_CPU`); the simulator
-    waits for the controller's two subscriptions. Returns the simulator's result."""
+    waits for two of the controller's subscriptions (gyro/imu and gyro/status, with gyro/kinetic_moment where its
+    law reads L). Returns the simulator's result."""
     from gyro_sim.ros.launch import node_cpus, node_preexec, writer_cpus_env
 
     cpus = node_cpus(NODE_CPU, "realtime" if "mode:=realtime" in sim_args else "lockstep")
