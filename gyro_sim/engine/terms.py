@@ -127,7 +127,7 @@ class Terms:
         self.field_om_max = max(self.field_om.tolist(), default=0.0)  # the general field's largest ω_p (rad/s)
         self.inv_tau = 1.0 / self.tau  # the modes' rates (1/s; the frozen-flow stepper's argument)
         # (the step plan's constants of the model, as StepSize.torque_time and frozen_flow.torque_scale take them)
-        self.b_list = self.b.tolist()  # T/A
+        self.b_sqrt2 = [math.sqrt(2.0) * b for b in self.b.tolist()]  # √2 b_k (T/A): a stator's |B| an ampere
         self.w_half = 0.5 * sum(abs(v) for v in self.w.tolist())  # ½Σ|w_n|
         self.field_B_norm = sum(float(np.linalg.norm(f)) for f in self.field_B) if self.field_B.size else 0.0
         self.field_om_absmax = max((abs(f) for f in self.field_om.tolist()), default=0.0)  # rad/s
