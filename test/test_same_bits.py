@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gyro_sim.engine.simulator import Simulator
-from gyro_sim.physics.frames import attitude_split, attitude_split_one
-from gyro_sim.scenes.scene import load_scene
+from gyro_sim.physics.frames import attitude_split, attitude_split_one, cross_rows
+from gyro_sim.scenes.scene import load_scene, merge_times
 from gyro_sim.scenes.step_control import ORDER, R_MEASURABLE, STIFF_ORDER, ErrorControl
 
 
@@ -143,3 +143,37 @@ def test_measure_as_diff_and_now(sim):
         assert _bits(got) == _bits((dL, dq, dp, ref.e_L, ref.e_q, ref.e_p))
         assert _bits(ctl.est) == _bits(ref.est) and _bits(ctl.dLn) == _bits(dLn)
         assert math.isfinite(got[0])
+
+
+def test_cross_rows_as_numpy():
+    """cross_rows (the stators' e1 × e2 a control law is handed, in scalar code) = np.cross, bit for bit."""
+    rng = np.random.default_rng(4)
+    for k in (0, 1, 3, 7):
+        for _ in range(200):
+            a = rng.standard_normal((k, 3)) * 10 ** rng.uniform(-8, 8)
+            b = rng.standard_normal((k, 3)) * 10 ** rng.uniform(-8, 8)
+            got, want = cross_rows(a, b), np.cross(a, b).reshape(-1, 3)
+            assert got.shape == want.shape == (k, 3) and _bits(got) == _bits(want)
+
+
+def test_merge_times_as_union1d():
+    """merge_times (sort and mask: sorted_union) = the np.unique / np.union1d form it replaced, bit for bit."""
+    rng = np.random.default_rng(5)
+
+    def ref(times, exact):
+        if not exact.size:
+            return np.unique(times)
+        j = np.searchsorted(exact, times)
+        lo, hi = np.clip(j - 1, 0, exact.size - 1), np.clip(j, 0, exact.size - 1)
+        near = (np.minimum(np.abs(exact[lo] - times), np.abs(exact[hi] - times))
+                <= 1e-9 * np.maximum(1.0, np.abs(times)))
+        return np.union1d(exact, times[~near])
+
+    for _ in range(500):
+        T = float(rng.uniform(0.1, 100.0))
+        times = np.sort(np.concatenate([np.arange(int(rng.integers(0, 60))) * T / 50, rng.uniform(0, T, 5)]))
+        exact = np.arange(int(rng.integers(0, 40))) * float(rng.choice([T / 50, T / 37, 0.02]))
+        exact = exact + rng.choice([0.0, 1e-12, 1e-6], exact.size) * (rng.random(exact.size) < 0.3)
+        exact = np.unique(exact)
+        got, want = merge_times(times, exact), ref(times, exact)
+        assert got.shape == want.shape and _bits(got) == _bits(want)

@@ -12,7 +12,7 @@ import numpy as np
 
 from gyro_sim.compiled import kernels
 from gyro_sim.physics.frames import _matrix, attitude_from_euler, quat_to_matrix
-from gyro_sim.scenes.scene import Scene
+from gyro_sim.scenes.scene import Scene, sorted_union  # noqa: F401  (its home: the scene's instants)
 
 
 #: the fixed step knobs of the runs before the accuracy plan (issue 19): steps per turn of the fastest rotation and
@@ -72,19 +72,6 @@ def controller_period(scene: Scene) -> Optional[float]:
     controller section."""
     ctl = scene.controller
     return (ctl.period or 1.0 / scene.output.rate) if ctl is not None else None
-
-
-def sorted_union(*parts: np.ndarray) -> np.ndarray:
-    """np.unique of the concatenated instants ``parts`` (s): its sort and its mask, the same array, without its
-    ~10 µs of Python around them (a run makes several at its start)."""
-    c = np.concatenate(parts).astype(float, copy=False).ravel()
-    c.sort()
-    if c.size < 2:
-        return c
-    keep = np.empty(c.size, np.bool_)
-    keep[0] = True
-    np.not_equal(c[1:], c[:-1], out=keep[1:])
-    return c[keep]
 
 
 def holds(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -178,7 +178,7 @@ class Runner:
         else:
             omega_b = body_rates(sim.terms.J, L, q)[1]
         if not hasattr(self, "_axes"):
-            self._axes = (tuple(sim.terms.stator_names), np.cross(sim.terms.e1, sim.terms.e2))
+            self._axes = (tuple(sim.terms.stator_names), sim.terms.control_axes)
         return ControlInput(t=stamp_ns(sim.t) * 1e-9, L=L, q=q, omega_b=omega_b, stator_names=self._axes[0], stator_axes=self._axes[1])
 
     def apply_commands(self, commands: dict) -> None:

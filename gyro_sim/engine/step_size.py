@@ -73,6 +73,7 @@ class StepSize:
         self._knob_warned: set = set()
         self._tt: Optional[tuple] = None  # (torque_time: the last one, with its key)
         self._qs: Optional[bool] = None  # (qs_applies: the scene's part)
+        self._ea = np.empty(3)  # (local_torque_scale's symmetry axis, case frame)
         # --- the step knobs for the scene's accuracy over the horizon (gyro_sim/scenes/accuracy.py): turns of the
         # fastest rotation the run can meet (spin it can reach, field rates, an effect's rate) and of the free body
         # motion
@@ -93,6 +94,7 @@ class StepSize:
         other.terms, other.quiet = terms, quiet
         other.slip_met, other._slip_warned, other.methods_used, other._knob_warned = 0.0, False, set(), set()
         other._tt = None
+        other._ea = np.empty(3)
         return other
 
     # --- a segment's stepper and step ----------------------------------------------------------------
@@ -238,7 +240,8 @@ class StepSize:
         e_a: Optional[np.ndarray] = None
         if self.attitude and Jt != Ja:
             w, x, yq, z = y[3:7].tolist()
-            e_a = np.array(_column(w, x, yq, z, ax))
+            e_a = self._ea  # (this simulator's scratch: read by the call below only)
+            e_a[0], e_a[1], e_a[2] = _column(w, x, yq, z, ax)
         Bre, Bim, om = terms.phasors(st.t, st.current, st.rate, st.phase)
         if not om.size:  # (no field: frozen_flow.torque_scale's answer)
             return math.inf
@@ -262,7 +265,7 @@ class StepSize:
         # |B| summed over the phasors: √2 b_k I_k a stator (its Bre, Bim are b_k I_k times two orthonormal vectors),
         # |B_p| a general field term (scalar code: this is asked once per command segment; the model's constants
         # made once, Terms)
-        B = sum(math.sqrt(2.0) * b * c for b, c in zip(terms.b_list, st.current.tolist(), strict=True) if c > 0)
+        B = sum(sb * c for sb, c in zip(terms.b_sqrt2, st.current.tolist(), strict=True) if c > 0)  # ((√2 b) I)
         B += terms.field_B_norm if terms.field_B.size else 0.0
         om = max(math.sqrt(yl[0] ** 2 + yl[1] ** 2 + yl[2] ** 2) * terms.Jinv_max, st.nu_max, terms.field_om_absmax)
         N = terms.c_m * B * B * (terms.w_half + terms.tail * (om + st.nu_max))

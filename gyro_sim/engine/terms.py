@@ -18,7 +18,7 @@ import numpy as np
 from gyro_sim.compiled import effects, kernels
 from gyro_sim.engine.model import _initial_attitude, body_rates, stator_triad
 from gyro_sim.physics.conductor import DEFAULT_N_MODES, conductor_model
-from gyro_sim.physics.frames import quat_to_matrix, symmetry_axis
+from gyro_sim.physics.frames import cross_rows, quat_to_matrix, symmetry_axis
 from gyro_sim.scenes.accuracy import truncated_model
 from gyro_sim.scenes.limits import stator_limits
 from gyro_sim.scenes.scene import Scene
@@ -38,7 +38,8 @@ class Terms:
     (s, -: the modes' time constants and weights), ``tail`` (s), ``c_m`` (the moment scale), ``tau_min`` (s, the
     fastest mode's, inf without modes), ``lam`` (the linear part's rates λ of y, 1/s); ``eff`` (the effects'
     vector, :func:`gyro_sim.compiled.effects.pack_effects`), ``n_extra`` (the effects' states in y);
-    ``stator_names``, ``e1``, ``e2``, ``axes`` (unit vectors, case frame), ``b`` (T/A), ``max_current``,
+    ``stator_names``, ``e1``, ``e2``, ``axes`` (unit vectors, case frame), ``control_axes`` (e1 × e2 as np.cross
+    gives it: what a control law is handed), ``b`` (T/A), ``max_current``,
     ``max_rate`` (A, rad/s: :func:`gyro_sim.scenes.limits.stator_limits`); ``field_B`` (T, complex), ``field_om``
     (rad/s): the general field B(t) = Re Σ B_p exp(−i ω_p t); ``free_axis``, ``inv_ref``: the free stepper's
     geometry (:func:`gyro_sim.compiled.kernels.integrate_free`)."""
@@ -93,6 +94,8 @@ class Terms:
         self.e1 = np.array([t[0] for t in triads]).reshape(-1, 3)
         self.e2 = np.array([t[1] for t in triads]).reshape(-1, 3)
         self.axes = np.array([t[2] for t in triads]).reshape(-1, 3)  # unit stator axes u = e1 × e2
+        # e1 × e2 as np.cross takes it: the stator axes a control law sees (ControlInput.stator_axes, the tick loop's)
+        self.control_axes = cross_rows(self.e1, self.e2)
         self.b = np.array([s.coil_constant for s in st], dtype=float)
         # each stator's largest current (A) and |field rate| (rad/s): a command beyond is refused (scenes/limits.py)
         self.max_current, self.max_rate = stator_limits(scene)
@@ -124,7 +127,7 @@ class Terms:
         self.field_om_max = max(self.field_om.tolist(), default=0.0)  # the general field's largest ω_p (rad/s)
         self.inv_tau = 1.0 / self.tau  # the modes' rates (1/s; the frozen-flow stepper's argument)
         # (the step plan's constants of the model, as StepSize.torque_time and frozen_flow.torque_scale take them)
-        self.b_list = self.b.tolist()  # T/A
+        self.b_sqrt2 = [math.sqrt(2.0) * b for b in self.b.tolist()]  # √2 b_k (T/A): a stator's |B| an ampere
         self.w_half = 0.5 * sum(abs(v) for v in self.w.tolist())  # ½Σ|w_n|
         self.field_B_norm = sum(float(np.linalg.norm(f)) for f in self.field_B) if self.field_B.size else 0.0
         self.field_om_absmax = max((abs(f) for f in self.field_om.tolist()), default=0.0)  # rad/s
@@ -178,15 +181,16 @@ class Terms:
 
     def _phasors(self, t: float, current: np.ndarray, rate: np.ndarray,
                  phase: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        on = current > 0
         if not self.field_om.size:
             # the stators alone: the expressions below element by element in Python floats (the same bits; the
             # cosines and sines NumPy's, of the same array), ~5 µs instead of ~9
+            cl = current.tolist()
+            idx = [i for i, c in enumerate(cl) if c > 0]
+            # (one stator on, the usual case: its slice, the mask's elements without the mask)
+            on = slice(idx[0], idx[0] + 1) if len(idx) == 1 else current > 0
             pon = phase[on]
             cs, ss = np.cos(pon).tolist(), np.sin(pon).tolist()
             E1, E2, bl = self._e12
-            cl = current.tolist()
-            idx = [i for i, c in enumerate(cl) if c > 0]
             re: list = []
             im: list = []
             for c, s, i in zip(cs, ss, idx, strict=True):
@@ -194,7 +198,8 @@ class Terms:
                 re += (a * (u[0] * c + v[0] * s), a * (u[1] * c + v[1] * s), a * (u[2] * c + v[2] * s))
                 im += (a * (-u[0] * s + v[0] * c), a * (-u[1] * s + v[1] * c), a * (-u[2] * s + v[2] * c))
             n = len(idx)
-            return np.array(re, dtype=float).reshape(n, 3), np.array(im, dtype=float).reshape(n, 3), rate[on]
+            return (np.array(re, dtype=float).reshape(n, 3), np.array(im, dtype=float).reshape(n, 3),
+                    rate[on].copy() if n == 1 else rate[on])  # (ω: a copy, as the mask makes; kept phasors)
         return self._phasors_array(t, current, rate, phase)
 
     def _phasors_array(self, t: float, current: np.ndarray, rate: np.ndarray,

@@ -259,7 +259,7 @@ class TickLoop:
             self.needs_time, self.reads_state = law.needs_time, law.reads_state
             terms = sim.terms
             self.names = law.command_names(terms.stator_names)
-            self.axes = law.control_axes(terms.stator_names, np.cross(terms.e1, terms.e2))  # (control_input's axes)
+            self.axes = law.control_axes(terms.stator_names, terms.control_axes)  # (control_input's axes)
         self.idx = np.array([sim.terms.stator_names.index(n) for n in self.names], dtype=np.int64)
 
     def advance(self, until: Optional[float] = None) -> Optional[slice]:
@@ -302,7 +302,7 @@ class TickLoop:
         i0 = r._bi
         j = min(int(self._next_hard[i0]), int(self._next_soft[i0]) + 1, i0 + MAX_BREAKS)
         if until is not None:
-            j = min(j, int(np.searchsorted(r.breaks, until, side="right")))
+            j = min(j, int(r.breaks.searchsorted(until, side="right")))
         room = r._base + r.out_y.shape[0]  # the first sample the output buffer cannot take
         return min(j, i0 + int(self._s_end[i0:j].searchsorted(room, side="right")))
 
@@ -316,7 +316,7 @@ class TickLoop:
         h = sim._seg[1][6]
         if not math.isfinite(h):
             return j  # (a step a stop)
-        return min(j, int(np.searchsorted(r.breaks, sim.t + sim.call_steps * h, side="right")))
+        return min(j, int(r.breaks.searchsorted(sim.t + sim.call_steps * h, side="right")))
 
     def _advance_main(self, bk: np.ndarray) -> tuple:
         """The run through breaks ``bk`` (from r._bi on) in one call of :func:`breaks`: its state, samples, field
