@@ -158,3 +158,29 @@ def test_event_switching_is_the_same_with_and_without_a_sample_callback():
     b = gyro_sim.run(sc, duration=0.3, on_samples=lambda rows: None)
     print(f"\n  {len(a.commands)} commands without, {len(b.commands)} with a callback")
     assert len(a.commands) == len(b.commands) and np.array_equal(a.L, b.L) and np.array_equal(a.q, b.q)
+
+
+def test_a_command_in_force_is_not_applied_again(monkeypatch):
+    """A law that repeats its command at every tick (the lockstep spin-up): the run and its shadow are left alone
+    (the same field, rates, step plan), and the command is still logged; a changed value, a rate of the other zero
+    sign or a value that is no float goes through set_stators (its checks) as before."""
+    from gyro_sim.engine.simulator import Simulator
+
+    r = Runner(gyro_sim.load_scene("spinup_thin_shell"), 0.1, attitude=True)
+    r.advance()  # (t = 0, the scene's commands)
+    calls = []
+    real = Simulator.set_stators
+    monkeypatch.setattr(Simulator, "set_stators", lambda self, c: (calls.append(dict(c)), real(self, c)))
+    cur, rate = float(r.sim.current[2]), float(r.sim.rate[2])
+    n_log = len(r.command_log)
+    r.apply_commands({"z3": (cur, rate)})
+    r.apply_commands({"z3": (cur, None)})
+    assert calls == [] and len(r.command_log) == n_log + 2
+    r.apply_commands({"z3": (cur * 0.5, rate)})
+    assert len(calls) == 1
+    r.apply_commands({"z1": (0.0, -0.0)})  # (z1's rate is +0.0: the sign is the command's)
+    r.apply_commands({"z3": (int(cur) if cur == int(cur) else cur, rate)})
+    assert len(calls) == 2 + (cur == int(cur))
+    assert math.copysign(1.0, float(r.sim.rate[0])) == -1.0
+    with pytest.raises(ValueError, match="current"):
+        r.apply_commands({"z3": (math.nan, rate)})

@@ -187,11 +187,20 @@ class Runner:
             if name not in self.sim.terms.stator_names:
                 raise ValueError(f"unknown stator {name!r}; allowed: {self.sim.terms.stator_names}")
         by_index = {self.sim.terms.stator_names.index(n): c for n, c in commands.items()}
-        self.sim.set_stators(by_index)
-        self.estimator.set_stators(by_index)
+        if not self._in_force(by_index):  # (a law that repeats its command at every tick: nothing to change)
+            self.sim.set_stators(by_index)
+            self.estimator.set_stators(by_index)
         if commands:
             names = list(commands)
             self.command_log.append((self.sim.t, names, [commands[n][0] for n in names], [commands[n][1] for n in names]))
+
+    def _in_force(self, by_index: dict) -> bool:
+        """Whether commands ``{stator index: (current A | None, rate rad/s | None)}`` are what the stators do now
+        (each value None or equal to the present one): then applying them changes nothing, in the run or its
+        shadow (the same field, no field step, the same rates; they passed the same limits when put in force)."""
+        cur, rate = self.sim.current.tolist(), self.sim.rate.tolist()
+        return all((c is None or _same_float(c, cur[k])) and (r is None or _same_float(r, rate[k]))
+                   for k, (c, r) in by_index.items())
 
     def advance(self, until: Optional[float] = None) -> slice:
         """Integrate to the next break (or to ``until`` if that comes first); returns the output rows written."""
@@ -353,6 +362,11 @@ class Runner:
         return run_result(self.scene, self.sim.terms, self.sim.attitude, self.samples(slice(0, self.row), euler=False),
                           self.sim.steps, list(self.command_log), self.wall_time, self.compile_time,
                           None if self.failure is not None else self.error_estimate(), self.failure)
+
+
+def _same_float(a, b: float) -> bool:
+    """``a`` is a Python float with the value and sign of ``b`` (-0.0 is not 0.0; NaN is never the same)."""
+    return type(a) is float and a == b and (a != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
 
 
 @functools.cache
