@@ -478,8 +478,8 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
                 kinds = list(node.subs)
                 waiter = MessageWait(node, [node.subs[k] for k in kinds], period=PUMP_PERIOD)
                 ready = [True] * len(kinds)
-            # one message of each subscription the wait found one in (a take that finds none costs ~10 µs: one a
-            # tick before); a second one queued behind it makes the next wait return at once
+            # one message of each subscription (a second one queued behind it makes the next wait return at once),
+            # none where the wait woke without a message (a take that finds none costs ~10 µs: one a tick before)
             for kind, r in zip(kinds, ready, strict=True):
                 if r:
                     msg = node.take(kind)
@@ -492,7 +492,9 @@ def _spin(node: ControllerNode, stop: threading.Event) -> int:
             # woken once a state: by the kind that completed the last one (the simulator publishes a state's two
             # messages back to back: the first is there when the last comes), by either while half of one is in
             # (woken at least every PUMP_PERIOD)
-            ready = waiter.wait(None if node.half or node.last_kind is None else [kinds.index(node.last_kind)])
+            woke = waiter.wait(None if node.half or node.last_kind is None else [kinds.index(node.last_kind)])
+            # woken by the kind that completes a state: the state's other messages came before it (back to back)
+            ready = [True] * len(kinds) if any(woke) else woke
     finally:
         waiter.close()
         executor.shutdown()
