@@ -226,8 +226,9 @@ def test_checks_and_end_in_the_compiled_loop(monkeypatch):
 @given(st.lists(st.sampled_from([0.0, -0.0, 0.1, 0.25, 1.0, 1e-300, 3.5, 7.0]), max_size=12),
        st.lists(st.sampled_from([0.0, 0.1, 0.3, 1.0, 2.0, 7.0]), max_size=6))
 def test_sorted_union_and_holds_are_unique_and_isin(a, b):
-    """The run's break sets (engine.model.sorted_union, holds) are np.unique's and np.isin's, bit for bit."""
-    from gyro_sim.engine.model import holds, sorted_union
+    """The run's break sets (scenes.scene.sorted_union, engine.model.holds): np.unique's and np.isin's bits."""
+    from gyro_sim.engine.model import holds
+    from gyro_sim.scenes.scene import sorted_union
 
     a, b = np.array(a, dtype=float), np.array(b, dtype=float)
     u = sorted_union(a, b)

@@ -291,8 +291,7 @@ class ControllerNode(Node):
         that changes them (with no wait on the subscriptions in progress)."""
         self.resubscribe = False
         self.kinds = self.law_kinds()
-        topics = {"imu": TOPIC_IMU, "L": TOPIC_KINETIC_MOMENT}
-        for kind, topic in topics.items():
+        for kind, topic in _TOPIC.items():
             if kind in self.kinds and kind not in self.subs:
                 self.subs[kind] = self.create_subscription(
                     message_class(TOPICS[topic]), node_topic(topic),

@@ -12,7 +12,7 @@ import numpy as np
 
 from gyro_sim.compiled import kernels
 from gyro_sim.physics.frames import _matrix, attitude_from_euler, quat_to_matrix
-from gyro_sim.scenes.scene import Scene, sorted_union  # noqa: F401  (its home: the scene's instants)
+from gyro_sim.scenes.scene import Scene
 
 
 #: the fixed step knobs of the runs before the accuracy plan (issue 19): steps per turn of the fastest rotation and

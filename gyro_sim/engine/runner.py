@@ -13,7 +13,8 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
-from gyro_sim.engine.model import body_rates, controller_period, sorted_union
+from gyro_sim.engine.model import body_rates, controller_period
+from gyro_sim.scenes.scene import sorted_union
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.saving import output_times, run_result, sample_arrays
 from gyro_sim.engine.shadow import ErrorEstimator

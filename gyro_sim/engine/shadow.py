@@ -25,7 +25,8 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 
 from gyro_sim.compiled import effects
-from gyro_sim.engine.model import AVERAGED_ERROR, sorted_union
+from gyro_sim.engine.model import AVERAGED_ERROR
+from gyro_sim.scenes.scene import sorted_union
 from gyro_sim.physics.frames import norm3
 from gyro_sim.scenes.accuracy import (FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
                                       ErrorEstimate)

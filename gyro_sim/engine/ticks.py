@@ -39,7 +39,8 @@ from gyro_sim.compiled import frozen_flow, kernels, qs_flow
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.compiled.effects import ON
 from gyro_sim.common.stamps import stamp_ns
-from gyro_sim.engine.model import holds, sorted_union
+from gyro_sim.engine.model import holds
+from gyro_sim.scenes.scene import sorted_union
 from gyro_sim.engine.steppers import COMPILED_STEPPERS, arguments
 
 __all__ = ["TickLoop", "tick_loop", "advance", "python_ticks", "MAX_BREAKS"]

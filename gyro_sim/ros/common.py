@@ -16,7 +16,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from gyro_sim.io.messages import QOS, stamp_ns
 from gyro_sim.scenes.limits import real_value
 from gyro_sim.scenes.scene_text import clip, preview
-from gyro_sim.ros.launch import PARENT_PID_ENV, STOP_SIGNALS, signal_name  # (launch.py: no rclpy)
+from gyro_sim.io.signals import signal_name
+from gyro_sim.ros.launch import PARENT_PID_ENV, STOP_SIGNALS  # (launch.py: no rclpy)
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}

@@ -43,7 +43,7 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
-from gyro_sim.io.signals import signal_name  # noqa: F401 (re-exported: gyro_sim.ros.common, replay)
+from gyro_sim.io.signals import signal_name
 
 #: SIGINT/SIGTERM: what stops the nodes (and ``gyro-sim run --ros``) cleanly
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # (SIGHUP: the terminal closed; 129)

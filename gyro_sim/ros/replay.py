@@ -18,7 +18,7 @@ from rosbags.rosbag2 import Reader
 from gyro_sim.io.messages import QOS, TOPICS, node_topic
 from gyro_sim.ros.common import (StopEvent, exit_status, flush_publishers, message_class, qos_profile, stop_on_signals,
                      wait_for_matches)
-from gyro_sim.ros.launch import signal_name
+from gyro_sim.io.signals import signal_name
 
 
 def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wait_for: int = 0,

@@ -59,10 +59,10 @@ from gyro_sim.compiled.compile_watch import announce_compiles, compile_seconds
 from gyro_sim.engine.faults import FaultConfig, Faults
 from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.io.recording import STREAM_BUFFER_ROWS, RecordingError
-from gyro_sim.io.signals import interrupt_reason
+from gyro_sim.io.signals import interrupt_reason, signal_name
 from gyro_sim.engine.simulate import Runner, controller_period
 from gyro_sim.ros.common import (MessageWait, exit_status, make_executor, message_class, node_main, parse_command,
-                                 qos_profile, signal_name, take, wait_for_matches)
+                                 qos_profile, take, wait_for_matches)
 from gyro_sim.ros.launch import CONTROLLER_ENDED_SIGNAL
 from gyro_sim.ros.wire import CommandReader, Wire, state_bytes, state_templates, take_serialized
 
