@@ -426,7 +426,10 @@ def test_signal_mid_run_leaves_a_complete_bag(tmp_path, sig):
             if last >= 50:
                 break
         proc.send_signal(sig)
-        out, err = proc.communicate(timeout=60)
+        # the lines the loop above read ahead of the 50th are in proc.stdout's buffer, which communicate() (reading
+        # the pipe itself) would miss: on a busy machine the child prints several before this reads one
+        out = proc.stdout.read()
+        _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
