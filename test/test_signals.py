@@ -468,3 +468,52 @@ def test_a_node_whose_ros_teardown_hangs_still_exits_with_its_status(procs, tmp_
     from gyro_sim.io.recording import bag_info
 
     assert bag_info(bag)["end_reason"] == "complete"
+
+
+# --- a signal handler takes no lock --------------------------------------------------------------
+
+#: a child that raises the stop signal in its main thread while that thread holds the stop event's lock (as when
+#: the group's Ctrl-C and the launcher's forwarded copy come µs apart: the second handler runs inside the first's
+#: ``stop.set()``); another thread waits on the event meanwhile
+HELD_STOP = textwrap.dedent("""
+    import signal, sys, threading
+    from gyro_sim.ros.common import StopEvent, exit_status, stop_on_signals
+    stop = StopEvent()
+    restore = stop_on_signals(stop)
+    woke = []
+    t = threading.Thread(target=lambda: woke.append(stop.wait(60)))
+    t.start()
+    with stop._cond:  # (inside stop.set() or stop.wait(): the event's lock is this thread's)
+        signal.raise_signal(signal.SIGINT)  # (the handler runs here, in this thread)
+        signal.raise_signal(signal.SIGTERM)
+    t.join(60)
+    print(stop.is_set(), stop.wait(0), woke, exit_status(stop), flush=True)
+    restore()
+""")
+
+
+@needs_ros
+def test_a_signal_that_comes_while_the_stop_event_is_held_stops_without_a_deadlock():
+    """The simulator hung until SIGKILLed (1 run in 12 here, CI once) when the second of two SIGINTs came inside
+    the first one's ``stop.set()``: the handler waited for the event's lock its own thread held. Bounded by a
+    timeout: a deadlock fails the test instead of hanging the suite."""
+    try:
+        r = subprocess.run([sys.executable, "-c", HELD_STOP], capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired as e:
+        raise AssertionError("the signal handler waited for the lock its own thread held (deadlock)") from e
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["True", "True", "[True]", "130"], r.stdout  # SIGINT came first: 130
+
+
+@needs_ros
+def test_the_controller_ended_flag_takes_no_lock():
+    """CONTROLLER_ENDED_SIGNAL's handler sets a flag the loop reads and clears in the main thread; a lock there
+    (a threading.Event) would deadlock a signal that comes inside clear()."""
+    from gyro_sim.ros.simulator_node import CONTROLLER_ENDED_SIGNAL, SignalFlag, _controller_ended_signal
+    flag = SignalFlag()
+    assert not any(hasattr(v, "acquire") for v in vars(flag).values())
+    with _controller_ended_signal(flag):
+        signal.raise_signal(CONTROLLER_ENDED_SIGNAL)
+        assert flag.is_set()
+        flag.clear()
+        assert not flag.is_set()

@@ -371,9 +371,75 @@ PARENT_POLL = 0.5  # wall s between looks at the parent (watch_parent)
 
 
 class StopEvent(threading.Event):
-    """The event that ends a node's loop; ``signum``: the signal that set it (None: none, or not yet)."""
+    """The event that ends a node's loop; ``signum``: the signal that set it (None: none, or not yet).
+
+    A signal handler stops it with :meth:`request`, which takes no lock: Python runs a handler in the main thread
+    between two bytecodes, which may be inside this event's own ``set()`` or ``wait()`` (holding its lock); a handler
+    calling ``set()`` there waits for itself forever. (Seen: the group's Ctrl-C and the launcher's forwarded copy
+    came ~µs apart, the second handler ran inside the first's ``set()``, and the simulator hung until SIGKILLed.)
+    :meth:`request` marks the event stopped for :meth:`is_set` and :meth:`wait` at once and has a daemon thread
+    (woken through a pipe) call ``set()`` for the other threads' waits."""
 
     signum: Optional[int] = None
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.requested = False  # (a plain attribute: written by a signal handler, read without a lock)
+        self._pipe: Optional[tuple[int, int]] = None
+
+    def arm(self) -> None:
+        """Start the thread that sets the event when :meth:`request` wakes it (once; before a handler may call
+        :meth:`request`)."""
+        if self._pipe is not None:
+            return
+        import os
+
+        r, w = os.pipe()
+        os.set_blocking(w, False)
+        self._pipe = (r, w)
+        threading.Thread(target=self._set_on_request, args=(r,), name="gyro_sim-stop", daemon=True).start()
+
+    def _set_on_request(self, r: int) -> None:
+        import os
+
+        try:
+            while os.read(r, 1) == b"s":  # (b"q" from disarm, or b"" when the pipe's write end is closed, ends it)
+                super().set()
+        finally:
+            os.close(r)
+
+    def request(self, signum: Optional[int] = None) -> None:
+        """Stop, from a signal handler (no lock taken): ``signum`` is kept if it is the first."""
+        import os
+
+        if self.signum is None and signum is not None:
+            self.signum = signum
+        self.requested = True
+        if self._pipe is not None:
+            try:
+                os.write(self._pipe[1], b"s")
+            except OSError:  # (a full pipe already holds a wake-up)
+                pass
+
+    def disarm(self) -> None:
+        """End the thread and close the pipe (after the handlers that call :meth:`request` are gone)."""
+        import os
+
+        if self._pipe is None:
+            return
+        r, w = self._pipe
+        self._pipe = None
+        try:
+            os.write(w, b"q")
+        except OSError:
+            pass
+        os.close(w)  # (the thread then reads b"q", or the end of the file, closes its end and returns)
+
+    def is_set(self) -> bool:
+        return self.requested or super().is_set()
+
+    def wait(self, timeout: Optional[float] = None) -> bool:
+        return self.requested or super().wait(timeout)
 
 
 def exit_status(stop: threading.Event) -> int:
@@ -385,23 +451,23 @@ def exit_status(stop: threading.Event) -> int:
     return 128 + int(signum) if signum else 128 + int(signal.SIGINT)
 
 
-def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
+def stop_on_signals(stop: StopEvent) -> Callable[[], None]:
     """SIGINT/SIGTERM set ``stop`` (the loop ends cleanly and closes its bag) and, the first time, ``stop.signum``.
     Returns a restore function. (Python runs the handler in the main thread, between bytecodes: a loop blocked in
     the executor sees it when its wait times out.)"""
     old = {s: signal.getsignal(s) for s in STOP_SIGNALS}
 
     def handler(signum, frame):
-        if getattr(stop, "signum", None) is None:
-            stop.signum = signum
-        stop.set()
+        stop.request(signum)  # (no lock: see StopEvent)
 
+    stop.arm()
     for s in old:
         signal.signal(s, handler)
 
     def restore():
         for s, h in old.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
+        stop.disarm()
 
     return restore
 

@@ -390,7 +390,7 @@ class Loop:
         self.refusals: dict = {}  # reason key -> [wall time of its last report, refusals not reported since]
         self.waiter = MessageWait(node, [node.command_sub])
         #: set by CONTROLLER_ENDED_SIGNAL: the launcher saw the controller's process end (gyro_sim.ros.launch)
-        self.controller_ended = threading.Event()
+        self.controller_ended = SignalFlag()
         self.failed: Optional[str] = None  # the run failed: what (the bag's end is 'failed: <this>')
         self.lost_log: list = []  # (t, why, policy) of each time the controller was lost
         self.new_run()  # before the bag is opened: a run that cannot be made leaves no half-written bag
@@ -946,8 +946,26 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
         executor.shutdown()
 
 
+class SignalFlag:
+    """A flag a signal handler sets: a plain attribute, no lock. (A threading.Event's ``set()`` takes its lock;
+    Python runs the handler in the main thread between bytecodes, maybe inside that event's ``clear()`` there,
+    holding the lock: the handler would wait for itself forever.)"""
+
+    def __init__(self) -> None:
+        self.value = False
+
+    def set(self) -> None:
+        self.value = True
+
+    def is_set(self) -> bool:
+        return self.value
+
+    def clear(self) -> None:
+        self.value = False
+
+
 @contextlib.contextmanager
-def _controller_ended_signal(event: threading.Event):
+def _controller_ended_signal(event: SignalFlag):
     """While the run goes on, :data:`CONTROLLER_ENDED_SIGNAL` (from ``gyro-sim run --ros``: the controller's process
     ended) sets ``event``; the launcher blocks it from the fork on, so one sent before now is delivered here."""
     if threading.current_thread() is not threading.main_thread():
