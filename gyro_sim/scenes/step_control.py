@@ -261,7 +261,8 @@ EARLY_RHO = 4.0
 REFINE_MAX_EARLY = 2.0
 COARSEN = 2.0
 #: a refinement whose next check shows the projected error above this fraction of the one before did not pay: the
-#: control refines no further there (the growth is not the steps')
+#: control refines no further there (the growth is not the steps'); an early check undoes it where the growth rose as
+#: many times as the step was shortened, or more (ErrorControl.check)
 REFINE_FUTILE = 0.7
 #: the PI step control's exponents over the order (Gustafsson 1991; Hairer & Wanner II, IV.2: α = 0.7, β = 0.4)
 PI_ALPHA = 0.7
