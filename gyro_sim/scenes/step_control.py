@@ -261,7 +261,8 @@ EARLY_RHO = 4.0
 REFINE_MAX_EARLY = 2.0
 COARSEN = 2.0
 #: a refinement whose next check shows the projected error above this fraction of the one before did not pay: the
-#: control refines no further there (the growth is not the steps')
+#: control refines no further there (the growth is not the steps'); an early check undoes it where the growth rose as
+#: many times as the step was shortened, or more (ErrorControl.check)
 REFINE_FUTILE = 0.7
 #: the PI step control's exponents over the order (Gustafsson 1991; Hairer & Wanner II, IV.2: α = 0.7, β = 0.4)
 PI_ALPHA = 0.7
@@ -583,11 +584,24 @@ class ErrorControl:
             return None if div == main.step_div else div / main.step_div
         refined = self.div_prev is not None and main.step_div > 1.5 * self.div_prev
         growth = max(new) / max(left, 1e-300)  # (the errors' growth per second over their tolerances)
-        growth_prev, self.div_prev, self.growth_prev = self.growth_prev, main.step_div, growth
+        div_last, growth_prev = self.div_prev, self.growth_prev
+        self.div_prev, self.growth_prev = main.step_div, growth
+        # the last refinement did not bring the error's growth down: it is not the steps' (an early error of L
+        # drifting the phases, a feedback law's switching). Steps r = step_div / div_last (≥ 1.5) times shorter make
+        # the steps' own error grow r^p (p ≥ 1) times slower, at most 1/1.5 of what it did: a growth still above
+        # REFINE_FUTILE of it was not made by the steps, and the control refines no further
+        futile = refined and growth_prev is not None and growth > REFINE_FUTILE * growth_prev
+        if futile and early and growth >= main.step_div / div_last * growth_prev:
+            # an early check undoes the refinement (back to the step of the check before) where the growth rose at
+            # least r times: as differences made step by step whatever the step's length do (the wobble of the
+            # first steps), not as the steps' error (r^-p). The early checks project a short stretch over the whole
+            # run, and the refinement was bought on such evidence alone; the regular checks (T/16 on) refine where
+            # the error is the steps'. (Undone at r^-p < growth ratio < r, nutation_slow's spin-up refined again
+            # later and took 9 % more steps; constant_field: its step, halved three times on a wobble of 1e-9 rad,
+            # stayed 8x short until 7.5 s, 17 000 of its 20 898 steps, and bought nothing; docs/benchmark.md)
+            return div_last / main.step_div
         if rho > (EARLY_RHO if early else 1.0):  # (early checks project a short stretch far: they act on more)
-            if refined and growth_prev is not None and growth > REFINE_FUTILE * growth_prev and not early:
-                # the last refinement did not bring the error's growth down: it is not the steps' (an early error of
-                # L drifting the phases, a feedback law's switching); shorter steps would only cost
+            if futile and not early:  # (shorter steps would only cost)
                 return None
             f = min(REFINE_MAX_EARLY if early else REFINE_MAX, max(pi, 1.0))
         elif rho < 0.3 and settled and not early:  # (coarser only on the regular checks' evidence)
