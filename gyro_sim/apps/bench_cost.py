@@ -5,7 +5,8 @@ control), in CPU seconds of this process (``time.process_time``; ratios from one
 ``gyro-sim bench --only cost`` runs ``spinup_thin_shell`` as shipped (its controller on) over 2, 20, 60, 200 s (and
 1200 s, the 20-minute spin-up, and 2000 s in full mode): steps, CPU, CPU per simulated second, the real-time factor
 in CPU, the run's own error estimate (L, the axis' directions, the spin phase against their tolerances), and the
-same duration at the old defaults. Each row's CPU is the least of its repeats (:data:`REPEAT_CPU`, :data:`REPEATS_MAX`). Cost linear in duration: CPU per simulated second within 2x across the durations.
+same duration at the old defaults. Each row's CPU is the least of its repeats (:data:`REPEAT_CPU`,
+:data:`REPEATS_MAX`). Cost linear in duration: CPU per simulated second within 2x across the durations.
 Then every built-in scene over its own duration, as shipped and at the old defaults (``scene_rows``: steps, CPU,
 the estimate against the scene's tolerances).
 """
@@ -65,7 +66,8 @@ def _one(T: float, old: bool, name: str = SCENE) -> CostRow:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         run(scene, duration=min(T, 0.05), force=True)  # (its kernels loaded: the row times the run)
-        spent, cpus = 0.0, []
+        spent = 0.0
+        cpus: list[float] = []
         while len(cpus) < REPEATS_MAX and (not cpus or spent < REPEAT_CPU):
             c0 = time.process_time()
             if old:
