@@ -98,7 +98,7 @@ def test_the_cases_cover_the_issue():
 def test_the_sweeps_under_estimates_are_cases():
     """The sweep's two under-estimates at 1e-8 (docs/benchmark.md): constant_field over its 60 s, the default scene
     over 20 s (its 60 s reference is too costly; 1e-9 beside it, the same reference); full mode only (their
-    references take 40-50 s of CPU each)."""
+    references take 13 and 18 s of CPU)."""
     sweep = [c for c in be.CASES if not c.quick]
     got = {(c.scene, dict(c.overrides)["duration"], c.tol) for c in sweep}
     assert got == {("constant_field", 60.0, 1e-8), ("spinup_thin_shell", 20.0, 1e-8), ("spinup_thin_shell", 20.0, 1e-9)}
