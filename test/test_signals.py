@@ -509,7 +509,8 @@ def test_a_signal_that_comes_while_the_stop_event_is_held_stops_without_a_deadlo
 def test_the_controller_ended_flag_takes_no_lock():
     """CONTROLLER_ENDED_SIGNAL's handler sets a flag the loop reads and clears in the main thread; a lock there
     (a threading.Event) would deadlock a signal that comes inside clear()."""
-    from gyro_sim.ros.simulator_node import CONTROLLER_ENDED_SIGNAL, SignalFlag, _controller_ended_signal
+    from gyro_sim.ros.common import SignalFlag
+    from gyro_sim.ros.simulator_node import CONTROLLER_ENDED_SIGNAL, _controller_ended_signal
     flag = SignalFlag()
     assert not any(hasattr(v, "acquire") for v in vars(flag).values())
     with _controller_ended_signal(flag):

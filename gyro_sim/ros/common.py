@@ -370,6 +370,24 @@ def flush_publishers(node, budget: float = 2.0) -> None:
 PARENT_POLL = 0.5  # wall s between looks at the parent (watch_parent)
 
 
+class SignalFlag:
+    """A flag a signal handler sets: a plain attribute, no lock. (A threading.Event's ``set()`` takes its lock;
+    Python runs the handler in the main thread between bytecodes, maybe inside that event's ``clear()`` there,
+    holding the lock: the handler would wait for itself forever.)"""
+
+    def __init__(self) -> None:
+        self.value = False
+
+    def set(self) -> None:
+        self.value = True
+
+    def is_set(self) -> bool:
+        return self.value
+
+    def clear(self) -> None:
+        self.value = False
+
+
 class StopEvent(threading.Event):
     """The event that ends a node's loop; ``signum``: the signal that set it (None: none, or not yet).
 
@@ -435,8 +453,8 @@ class StopEvent(threading.Event):
             pass
         os.close(w)  # (the thread then reads b"q", or the end of the file, closes its end and returns)
 
-    def is_set(self) -> bool:  # (read several times a tick: the flags themselves, no call of Event.is_set)
-        return self.requested or self._flag  # type: ignore[attr-defined]
+    def is_set(self) -> bool:
+        return self.requested or super().is_set()
 
     def wait(self, timeout: Optional[float] = None) -> bool:
         return self.requested or super().wait(timeout)
@@ -509,5 +527,5 @@ def watch_parent(stop: threading.Event, environ=None) -> Optional[threading.Thre
 
 
 __all__ = ["message_class", "qos_profile", "msg_time", "take", "MessageWait", "make_executor", "parse_command", "stop_on_signals", "node_main",
-           "StopEvent", "exit_status", "signal_name", "ignore_signals", "watch_parent", "STOP_SIGNALS", "PARENT_PID_ENV",
+           "StopEvent", "SignalFlag", "exit_status", "signal_name", "ignore_signals", "watch_parent", "STOP_SIGNALS", "PARENT_PID_ENV",
            "node_usage", "wants_help", "flush_publishers", "wait_for_matches", "stamp_ns"]

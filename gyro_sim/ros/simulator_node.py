@@ -61,8 +61,8 @@ from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.io.recording import STREAM_BUFFER_ROWS, RecordingError
 from gyro_sim.io.signals import interrupt_reason, signal_name
 from gyro_sim.engine.simulate import Runner, controller_period
-from gyro_sim.ros.common import (MessageWait, exit_status, make_executor, message_class, node_main, parse_command,
-                                 qos_profile, take, wait_for_matches)
+from gyro_sim.ros.common import (MessageWait, SignalFlag, exit_status, make_executor, message_class, node_main,
+                                 parse_command, qos_profile, take, wait_for_matches)
 from gyro_sim.ros.launch import CONTROLLER_ENDED_SIGNAL
 from gyro_sim.ros.wire import CommandReader, Wire, state_bytes, state_templates, take_serialized
 
@@ -944,24 +944,6 @@ def run_node(node: SimulatorNode, stop: threading.Event) -> int:
         if loop is not None:
             loop.waiter.close()
         executor.shutdown()
-
-
-class SignalFlag:
-    """A flag a signal handler sets: a plain attribute, no lock. (A threading.Event's ``set()`` takes its lock;
-    Python runs the handler in the main thread between bytecodes, maybe inside that event's ``clear()`` there,
-    holding the lock: the handler would wait for itself forever.)"""
-
-    def __init__(self) -> None:
-        self.value = False
-
-    def set(self) -> None:
-        self.value = True
-
-    def is_set(self) -> bool:
-        return self.value
-
-    def clear(self) -> None:
-        self.value = False
 
 
 @contextlib.contextmanager
