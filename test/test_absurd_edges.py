@@ -175,6 +175,42 @@ def test_a_burst_of_ctrl_c_ends_with_one_line_and_a_readable_bag(tmp_path):
     assert info["end_reason"] == "interrupted: signal SIGINT"
 
 
+def test_a_ctrl_c_inside_a_lazy_import_of_the_summary_is_an_interruption(tmp_path, monkeypatch, capsys):
+    """CI, a burst of Ctrl-C: a later one landed while the summary imported the bag reader, inside a dataclass
+    field's ``__set_name__``; Python 3.11 wraps that KeyboardInterrupt in a RuntimeError, and the summary said
+    ``error: cannot read the bag …: Error calling __set_name__ …`` after the run's ``interrupted`` line. Now a
+    wrapped Ctrl-C is raised again as one (the run's handler says ``interrupted … again: no summary``)."""
+    from gyro_sim.apps import cli_bag
+
+    class _CtrlC:
+        def __set_name__(self, owner, name):
+            raise KeyboardInterrupt
+
+    def _bag_result(bag):
+        class _Scan:  # (what an import does while it defines a class, as io/bag_repair.py's _Scan)
+            bad_chunks = _CtrlC()
+        return _Scan
+
+    monkeypatch.setattr(cli_bag, "_bag_result", _bag_result)
+    with pytest.raises(KeyboardInterrupt):
+        cli_bag._summarise_bag(tmp_path / "bag", tmp_path / "x.png")
+    assert "cannot read the bag" not in capsys.readouterr().err
+    with pytest.raises(KeyboardInterrupt):  # (every command's line for an unreadable bag)
+        cli_bag._unreadable(tmp_path / "bag", _wrapped_ctrl_c())
+    assert cli_bag._unreadable(tmp_path / "bag", RuntimeError("a real fault")) == 2  # (others stay errors)
+    assert "cannot read the bag" in capsys.readouterr().err
+
+
+def _wrapped_ctrl_c() -> RuntimeError:
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise RuntimeError("Error calling __set_name__") from exc
+    except RuntimeError as wrapped:
+        return wrapped
+
+
 # --- a bag cut before its first sample ---------------------------------------------------------------------------
 
 @pytest.fixture

@@ -89,7 +89,11 @@ def _bag_result(bag: Path):
 
 def _unreadable(bag: Path, exc: Exception) -> int:
     """The one error line for a bag that cannot be read: a recording that was not closed is named as
-    such, with the command that recovers it."""
+    such, with the command that recovers it. A Ctrl-C that ``exc`` wraps (one that stopped a lazy import) is
+    raised again: it is an interruption, not a bag's fault."""
+    from gyro_sim.io.signals import reraise_interrupt
+
+    reraise_interrupt(exc)
     from gyro_sim.io.bag_repair import not_closed_message
 
     if isinstance(exc, NoSamples):  # (valid, but nothing to show)

@@ -8,7 +8,8 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator, Optional
 
-__all__ = ["RunInterrupted", "exit_status", "sigterm_as_interrupt", "signal_name", "interrupt_reason"]
+__all__ = ["RunInterrupted", "exit_status", "sigterm_as_interrupt", "signal_name", "interrupt_reason",
+           "reraise_interrupt"]
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -47,6 +48,24 @@ def interrupt_reason(exc: BaseException) -> str:
 def exit_status(exc: BaseException) -> int:
     """128 + the signal that ended a run (130 for Ctrl-C's plain KeyboardInterrupt, 143 for SIGTERM)."""
     return exc.exit_status if isinstance(exc, RunInterrupted) else 128 + int(signal.SIGINT)
+
+
+def reraise_interrupt(exc: BaseException) -> None:
+    """Raise the KeyboardInterrupt that ``exc`` wraps, if any (in its ``__cause__`` / ``__context__`` chain).
+
+    Python 3.11 wraps an exception raised while a class body is completed (a dataclass field's ``__set_name__``)
+    in ``RuntimeError("Error calling __set_name__ …")``: a Ctrl-C that lands while a module is imported lazily
+    then reaches an ``except Exception`` as an error of the work it stopped (seen: a burst of Ctrl-C said
+    ``cannot read the bag``). Code that turns exceptions into an error line calls this first."""
+    seen = set()
+    e: Optional[BaseException] = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            if e is exc:
+                raise e
+            raise e from exc
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
 
 
 #: [depth of the write sections open, the signal held meanwhile]: a signal that arrives while one sample's
