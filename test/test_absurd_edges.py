@@ -201,6 +201,23 @@ def test_a_ctrl_c_inside_a_lazy_import_of_the_summary_is_an_interruption(tmp_pat
     assert "cannot read the bag" in capsys.readouterr().err
 
 
+def test_a_wrapped_ctrl_c_that_no_command_handled_is_an_interruption(monkeypatch, capsys):
+    """The same wrapped Ctrl-C where no command catches it (while a command starts): one ``interrupted`` line and
+    130, not a RuntimeError traceback; any other RuntimeError still propagates."""
+    monkeypatch.setattr(cli, "_main", lambda argv: (_ for _ in ()).throw(_wrapped_ctrl_c()))
+    sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    handlers = [signal.getsignal(s) for s in sigs]
+    try:
+        assert cli.main(["scenes"]) == 130
+    finally:  # (the interrupted command ignores later signals; pytest's process must not)
+        for s, h in zip(sigs, handlers):
+            signal.signal(s, h)
+    assert capsys.readouterr().err == "interrupted (SIGINT)\n"
+    monkeypatch.setattr(cli, "_main", lambda argv: (_ for _ in ()).throw(RuntimeError("a real fault")))
+    with pytest.raises(RuntimeError, match="a real fault"):
+        cli.main(["scenes"])
+
+
 def _wrapped_ctrl_c() -> RuntimeError:
     try:
         try:

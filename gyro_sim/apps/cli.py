@@ -39,6 +39,7 @@ from pathlib import Path
 from gyro_sim import __version__
 from gyro_sim.common.extras import MissingExtra
 from gyro_sim.compiled.compile_watch import hold_interrupts_while_compiling
+from gyro_sim.io.signals import wrapped_interrupt
 from gyro_sim.apps.console import _write
 
 # the commands, by group, and what they share (re-exported: `cli._cmd_scenes` and the like are the names the parser
@@ -291,6 +292,11 @@ def main(argv=None) -> int:
             status = _error(str(exc))
         except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM / SIGHUP where no command handled it (e.g. while
             status = _interrupted(exc)    # starting, or a second one while a stopped run is summarised)
+        except RuntimeError as exc:  # (a Ctrl-C inside a lazily imported module's class body: 3.11 wraps it)
+            interrupt = wrapped_interrupt(exc)
+            if interrupt is None:
+                raise
+            status = _interrupted(interrupt)
         except OSError as exc:  # a file system error on a path that the checks before the work did not foresee
             if isinstance(exc, BrokenPipeError) or exc.filename is None:
                 raise

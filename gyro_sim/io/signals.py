@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from typing import Iterator, Optional
 
 __all__ = ["RunInterrupted", "exit_status", "sigterm_as_interrupt", "signal_name", "interrupt_reason",
-           "reraise_interrupt"]
+           "reraise_interrupt", "wrapped_interrupt"]
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -50,22 +50,29 @@ def exit_status(exc: BaseException) -> int:
     return exc.exit_status if isinstance(exc, RunInterrupted) else 128 + int(signal.SIGINT)
 
 
-def reraise_interrupt(exc: BaseException) -> None:
-    """Raise the KeyboardInterrupt that ``exc`` wraps, if any (in its ``__cause__`` / ``__context__`` chain).
+def wrapped_interrupt(exc: BaseException) -> Optional[KeyboardInterrupt]:
+    """The KeyboardInterrupt in ``exc``'s ``__cause__`` / ``__context__`` chain (``exc`` itself included), or None.
 
     Python 3.11 wraps an exception raised while a class body is completed (a dataclass field's ``__set_name__``)
     in ``RuntimeError("Error calling __set_name__ …")``: a Ctrl-C that lands while a module is imported lazily
-    then reaches an ``except Exception`` as an error of the work it stopped (seen: a burst of Ctrl-C said
-    ``cannot read the bag``). Code that turns exceptions into an error line calls this first."""
+    then reaches an ``except Exception`` as an error of the work it stopped (seen on CI: a burst of Ctrl-C said
+    ``cannot read the bag``)."""
     seen = set()
     e: Optional[BaseException] = exc
     while e is not None and id(e) not in seen:
         if isinstance(e, KeyboardInterrupt):
-            if e is exc:
-                raise e
-            raise e from exc
+            return e
         seen.add(id(e))
         e = e.__cause__ or e.__context__
+    return None
+
+
+def reraise_interrupt(exc: BaseException) -> None:
+    """Raise the KeyboardInterrupt that ``exc`` wraps, if any (:func:`wrapped_interrupt`): code that turns
+    exceptions into an error line calls this first."""
+    ki = wrapped_interrupt(exc)
+    if ki is not None:
+        raise ki from (None if ki is exc else exc)
 
 
 #: [depth of the write sections open, the signal held meanwhile]: a signal that arrives while one sample's
