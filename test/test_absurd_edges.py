@@ -210,7 +210,7 @@ def test_a_wrapped_ctrl_c_that_no_command_handled_is_an_interruption(monkeypatch
     try:
         assert cli.main(["scenes"]) == 130
     finally:  # (the interrupted command ignores later signals; pytest's process must not)
-        for s, h in zip(sigs, handlers):
+        for s, h in zip(sigs, handlers, strict=True):
             signal.signal(s, h)
     assert capsys.readouterr().err == "interrupted (SIGINT)\n"
     monkeypatch.setattr(cli, "_main", lambda argv: (_ for _ in ()).throw(RuntimeError("a real fault")))
