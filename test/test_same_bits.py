@@ -10,7 +10,7 @@ import pytest
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.physics.frames import attitude_split, attitude_split_one, cross_rows
 from gyro_sim.scenes.scene import load_scene, merge_times
-from gyro_sim.scenes.step_control import ORDER, R_MEASURABLE, STIFF_ORDER, ErrorControl
+from gyro_sim.scenes.step_control import COARSE_ORDER, ORDER, R_MEASURABLE, STIFF_ORDER, ErrorControl
 
 
 def _bits(x) -> bytes:
@@ -26,9 +26,13 @@ def _ref_denom(ctl, lengths: bool) -> float:
     for m, k in ctl.weights.items():
         r = k / max(ctl.shadow_steps.get(m, k), 1)
         if r >= R_MEASURABLE:
-            if lengths:
+            p = ORDER.get(m, STIFF_ORDER)
+            if lengths:  # (the stretches whose shadow was below SPT_MIN at COARSE_ORDER)
                 r = max(min(r, k / max(ctl.shadow_len.get(m, k), 1)), R_MEASURABLE)
-            acc += k / (r ** ORDER.get(m, STIFF_ORDER) - 1.0)
+                kc = min(ctl.coarse.get(m, 0), k)
+                acc += (k - kc) / (r ** p - 1.0) + (kc / (r ** COARSE_ORDER[m] - 1.0) if kc else 0.0)
+            else:
+                acc += k / (r ** p - 1.0)
             n += k
     for (m, f), k in ctl.finer.items():
         acc += k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))
@@ -105,12 +109,14 @@ def test_denominators_in_one_pass():
     methods = list(ORDER)
     for _ in range(500):
         ctl = ErrorControl.__new__(ErrorControl)
-        ctl.weights, ctl.shadow_steps, ctl.shadow_len, ctl.finer = {}, {}, {}, {}
+        ctl.weights, ctl.shadow_steps, ctl.shadow_len, ctl.finer, ctl.coarse = {}, {}, {}, {}, {}
         for m in rng.choice(methods, size=int(rng.integers(0, 4)), replace=False).tolist():
             k = int(rng.integers(0, 5000))
             ctl.weights[m] = k
             ctl.shadow_steps[m] = int(rng.integers(0, k + 2))
             ctl.shadow_len[m] = ctl.shadow_steps[m] + float(rng.uniform(0.0, k / 2 + 1))
+            if m in COARSE_ORDER and rng.integers(0, 2):
+                ctl.coarse[m] = int(rng.integers(0, k + 1))
         for _ in range(int(rng.integers(0, 3))):
             ctl.finer[(str(rng.choice(methods)), float(rng.uniform(4.0, 40.0)))] = float(rng.uniform(0.0, 100.0))
         a, b = ctl._denoms()

@@ -37,3 +37,28 @@ def test_an_early_refinement_that_did_not_pay_is_undone(constant_field_60s):
     assert est.L >= eL and est.attitude >= eq and est.phase >= ep  # honest
     assert est.L <= s.accuracy.rtol and est.attitude <= s.accuracy.attitude and est.phase <= est.phase_tol
     assert eL <= s.accuracy.rtol and eq <= s.accuracy.attitude and ep <= est.phase_tol
+
+
+@pytest.mark.parametrize("name, T, most, before", [("three_stators", 16.0, 30_000, 41_564),
+                                                   ("drift_sources", 10.0, 50_000, 79_809)])
+def test_lawson8_coarsens_to_spt_min_with_an_honest_estimate(name, T, most, before):
+    """ErrorControl.coarsest held lawson8's shadow at SPT_MIN (8) steps per turn, the run at 16, whatever the error
+    (three_stators 16 s: 41 564 steps, L 5.6e-14 estimated against its 1e-6). The run now coarsens to SPT_MIN, its
+    shadow to 4, and those stretches are estimated at COARSE_ORDER: at order 8 drift_sources' L estimate was 1.6x
+    below its true error. Against lawson8 at 48 steps per turn (its own error ~1e-13 in L)."""
+    ov = {"duration": T}
+    r = run(load_scene(name, overrides=ov), attitude=True)
+    ref = run(load_scene(name, overrides={**ov, "integrator": {"method": "lawson8", "steps_per_turn": 48}}),
+              attitude=True, estimate=False)
+    s = r.scene
+    assert np.allclose(r.t, ref.t, rtol=0, atol=1e-9)
+    eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1)) / np.max(np.linalg.norm(ref.L, axis=1)))
+    di, ph = attitude_split(r.q, ref.q, symmetry_axis(s.rotor.inertia), r.L, ref.L)
+    eq, ep = float(np.max(di)), float(np.max(ph))
+    est = r.error_estimate
+    print(f"\n{name} {T:g} s: {r.steps} steps ({before} before); true L {eL:.2e}, directions {eq:.2e}, phase "
+          f"{ep:.2e}; estimate {est.L:.2e}, {est.attitude:.2e}, {est.phase:.2e}")
+    assert r.steps <= most
+    assert est.L >= eL and est.attitude >= eq and est.phase >= ep  # honest
+    assert est.L <= 10 * max(eL, 1e-12) and est.phase <= 10 * max(ep, 1e-9)  # (and not far above)
+    assert est.met and eL <= s.accuracy.rtol and eq <= s.accuracy.attitude and ep <= est.phase_tol

@@ -28,8 +28,8 @@ from gyro_sim.compiled import effects
 from gyro_sim.engine.model import AVERAGED_ERROR
 from gyro_sim.scenes.scene import sorted_union
 from gyro_sim.physics.frames import norm3
-from gyro_sim.scenes.accuracy import (FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, STIFF, ErrorControl,
-                                      ErrorEstimate)
+from gyro_sim.scenes.accuracy import (COARSE_ORDER, FINER, FINER_TAU, R_MEASURABLE, RATE_KNOB, SHADOW_RATIO, SPT_MIN,
+                                      STIFF, ErrorControl, ErrorEstimate)
 from gyro_sim.scenes.scene import Scene
 from gyro_sim.scenes.tolerance import has_symmetry_axis, phase_tolerance
 
@@ -208,9 +208,12 @@ class ErrorEstimator:
         sim = self.sim
         assert sim._seg is not None  # (it has advanced)
         _, _, _, _, free, method, h = sim._seg[1]
+        # (the shadow below SPT_MIN steps a turn: its knob's, ErrorControl.coarsest)
+        coarse = (method in COARSE_ORDER and not free
+                  and sim.step_plan.knob(method) * sim.step_div < SHADOW_RATIO[method] * SPT_MIN[method])
         self.control.note_method(method, sim.steps - self._steps_seen, shadow_steps,
                                  exact=free and sim.terms.free_axis != -1, stiff=h > sim.tau_min, finer=finer,
-                                 finer_ratio=ratio)
+                                 finer_ratio=ratio, coarse=coarse)
         self._steps_seen = sim.steps
 
     def resync_shadow(self) -> None:

@@ -91,6 +91,7 @@ from gyro_sim.scenes.step_control import (  # noqa: F401  (the names of the accu
     ORDER,
     STIFF_ORDER,
     STIFF,
+    COARSE_ORDER,
     SHADOW_RATIO,
     CHECKS,
     R_MEASURABLE,

@@ -232,6 +232,12 @@ ORDER = {"lawson8": 8, "etdrk4": 4, "frozen_flow": 1, "free": 8, "qs_flow": 1}
 #: at order 1 (d/(R − 1): the run's difference from its shadow, an upper bound while the error falls with the step)
 STIFF_ORDER = 1
 STIFF = "etdrk4 (stiff)"
+#: the estimate's order of a stepper's stretches whose shadow takes fewer than SPT_MIN steps per turn (the error
+#: control lets it down to SPT_MIN / SHADOW_RATIO, ErrorControl.coarsest): between 8 and 4 steps per turn lawson8's
+#: error fell as h^7.3 on drift_sources and reorient_L, h^7 on phase_portrait (h^8.7 on three_stators), and
+#: d/(2^8 − 1) was 1.6x below drift_sources' true L error; below the least measured, with a margin (docs/accuracy.md,
+#: "Floors"). The step control keeps ORDER (its decisions as they were)
+COARSE_ORDER = {"lawson8": 6.5}
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
 SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 2.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
@@ -374,6 +380,7 @@ class ErrorControl:
         self.weights: dict = {}  # steps of each (inexact) stepper
         self.shadow_steps: dict = {}  # the shadow's steps over the same stretches
         self.shadow_len: dict = {}  # the same, at least the run's over SHADOW_RATIO (the steps' lengths, note_method)
+        self.coarse: dict = {}  # the run's steps of each stepper where its shadow was below SPT_MIN (COARSE_ORDER)
         # the run's steps of each stepper over the stretches the shadow followed finer, by (stepper, the ratio of the
         # run's steps to the shadow's there)
         self.finer: dict = {}
@@ -416,7 +423,8 @@ class ErrorControl:
                 p = ORDER.get(m, STIFF_ORDER)
                 acc += k / (r ** p - 1.0)
                 r = max(min(r, k / max(shadow_len.get(m, k), 1)), R_MEASURABLE)
-                acc_e += k / (r ** p - 1.0)
+                kc = min(self.coarse.get(m, 0), k)
+                acc_e += (k - kc) / (r ** p - 1.0) + (kc / (r ** COARSE_ORDER[m] - 1.0) if kc else 0.0)
                 n += k
         for (m, f), k in self.finer.items():
             x = k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))
@@ -426,14 +434,14 @@ class ErrorControl:
         return (n / acc if acc > 0 else math.inf), (n / acc_e if acc_e > 0 else math.inf)
 
     def note_method(self, method: str, steps: int, shadow_steps: int, exact: bool = False,
-                    stiff: bool = False, finer: float = 0.0, finer_ratio: float = FINER) -> None:
+                    stiff: bool = False, finer: float = 0.0, finer_ratio: float = FINER, coarse: bool = False) -> None:
         """Count a stretch's steps (run and shadow) for the Richardson denominator; ``stiff``: an ETDRK4 stretch
         with steps longer than the fastest mode's τ (:data:`STIFF_ORDER`); ``finer``: a stretch the shadow
         followed with steps at most 1/:data:`FINER` of the run's (:meth:`ErrorEstimator.sync_shadow`), its value the
         error the run's steps there make against steps of the run's plan, (h / h_plan)^p ≤ 1: a stretch cut short (an
         early check, T/4096) weighs little beside the stretches of whole steps; ``finer_ratio``: how many times shorter
         the shadow's steps were there (:data:`FINER`, more where the run's steps are longer than :data:`FINER_TAU`
-        τ_min)."""
+        τ_min); ``coarse``: the shadow's steps there were longer than SPT_MIN a turn (:data:`COARSE_ORDER`)."""
         # the estimate's r is of the steps' lengths, not of their counts: where the run's own stops (samples, ticks)
         # cut its steps it takes more than SHADOW_RATIO times the shadow's, but its longest steps, which make its
         # error, are still only SHADOW_RATIO times shorter than the shadow's (magnetizable_body: counts 3.3, r^8 − 1
@@ -450,6 +458,8 @@ class ErrorControl:
             self.weights[method] = self.weights.get(method, 0) + steps
             self.shadow_steps[method] = self.shadow_steps.get(method, 0) + shadow_steps
             self.shadow_len[method] = self.shadow_len.get(method, 0) + max(shadow_steps, steps / ratio)
+            if coarse and method in COARSE_ORDER:
+                self.coarse[method] = self.coarse.get(method, 0) + steps
 
     @property
     def e_L(self) -> float:
@@ -506,14 +516,16 @@ class ErrorControl:
         self.dLn = 0.0
 
     def coarsest(self, main, method: str) -> float:
-        """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_CONTROL_MAX."""
+        """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_CONTROL_MAX (the
+        shadow's: lawson8's own, its shadow then down to SPT_MIN / SHADOW_RATIO, estimated at COARSE_ORDER)."""
         if method == "frozen_flow":  # (its shadow's knob SHADOW_RATIO times coarser: still in the asymptotic range)
             return self.plan.rate_change / RATE_CHANGE_CONTROL_MAX
         if method == "qs_flow":
             return SHADOW_RATIO[method] * self.plan.qs_rate_change / QS_RATE_CHANGE_MAX
         div = 1.0
         if method in SPT_MIN:
-            div = SHADOW_RATIO[method] * SPT_MIN[method] / self.plan.steps_per_turn[method]
+            div = (1.0 if method in COARSE_ORDER else SHADOW_RATIO[method]) * SPT_MIN[method] \
+                / self.plan.steps_per_turn[method]
         if method == "lawson8" and main.tau.size:  # the shadow's lawson8 step too within 2 τ_min (its order holds)
             div = max(div, SHADOW_RATIO[method] * main._h_for("lawson8") / (2.0 * main.tau_min))
         return div
