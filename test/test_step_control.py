@@ -71,7 +71,7 @@ def test_the_free_stepper_keeps_its_coarsest_step(rate, most):
     16 a turn is a 19.6 ms step, the run steps from sample to sample (5 ms; 2008 steps, 2000 under the old defaults'
     48 a turn) and its shadow at twice that (lead_gap), whatever the bound. With 1 Hz samples the bound holds the run
     (534 steps): let down to 8 a turn as lawson8's is (COARSE_ORDER 6.5), the control, which saw no growth of the
-    attitude's difference at 14 of its 23 checks, swung step_div 1.38 → 0.69 → 1.03 → 0.51 → 0.93 and the run ended
+    attitude's difference at 16 of its 23 checks, swung step_div 1.38 → 0.69 → 1.03 → 0.51 → 0.93 and the run ended
     at 2.3e-6 rad against its 1e-6 (480 steps; estimate 4.3e-6, not met). Against the Jacobi solution."""
     from gyro_sim.physics.closed_forms import free_rigid_body
     from gyro_sim.physics.frames import quat_to_matrix
