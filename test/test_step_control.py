@@ -62,3 +62,29 @@ def test_lawson8_coarsens_to_spt_min_with_an_honest_estimate(name, T, most, befo
     assert est.L >= eL and est.attitude >= eq and est.phase >= ep  # honest
     assert est.L <= 10 * max(eL, 1e-12) and est.phase <= 10 * max(ep, 1e-9)  # (and not far above)
     assert est.met and eL <= s.accuracy.rtol and eq <= s.accuracy.attitude and ep <= est.phase_tol
+
+
+@pytest.mark.parametrize("rate, most", [(200.0, 2040), (1.0, None)])
+def test_the_free_stepper_keeps_its_coarsest_step(rate, most):
+    """free_rotor (triaxial, 10 s): the free stepper's shadow stays at SPT_MIN (8) a turn, the run at 16
+    (ErrorControl.coarsest; no COARSE_ORDER for it). As shipped (200 Hz samples) that bound holds nothing: the plan's
+    16 a turn is a 19.6 ms step, the run steps from sample to sample (5 ms; 2008 steps, 2000 under the old defaults'
+    48 a turn) and its shadow at twice that (lead_gap), whatever the bound. With 1 Hz samples the bound holds the run
+    (534 steps): let down to 8 a turn as lawson8's is (COARSE_ORDER 6.5), the control, which saw no growth of the
+    attitude's difference at 16 of its 23 checks, swung step_div 1.38 → 0.69 → 1.03 → 0.51 → 0.93 and the run ended
+    at 2.3e-6 rad against its 1e-6 (480 steps; estimate 4.3e-6, not met). Against the Jacobi solution."""
+    from gyro_sim.physics.closed_forms import free_rigid_body
+    from gyro_sim.physics.frames import quat_to_matrix
+
+    r = run(load_scene("free_rotor", overrides={"output.rate": rate}))
+    R = quat_to_matrix(r.q)
+    _, Rx = free_rigid_body(r.scene.inertia, R[0], r.L[0], r.t)
+    d = np.linalg.norm(R - Rx, axis=(1, 2)) / (2 * np.sqrt(2))  # (2√2 sin(angle/2))
+    err = float(np.max(2 * np.arcsin(np.clip(d, 0, 1))))
+    est = r.error_estimate
+    print(f"\nfree_rotor, {rate:g} Hz samples: {r.steps} steps; true attitude {err:.2e} rad, estimate "
+          f"{est.attitude:.2e}")
+    if most is not None:
+        assert r.steps <= most
+    assert est.attitude >= err and est.attitude <= 10 * max(err, 1e-11)  # honest
+    assert est.met and err <= r.scene.accuracy.attitude
