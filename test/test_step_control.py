@@ -26,10 +26,7 @@ def test_an_early_refinement_that_did_not_pay_is_undone(constant_field_60s):
     2.7e-7 / 1.8e-5: L / directions rad / phase rad)."""
     r, ref = constant_field_60s
     s = r.scene
-    assert np.allclose(r.t, ref.t, rtol=0, atol=1e-9)
-    eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1)) / np.max(np.linalg.norm(ref.L, axis=1)))
-    di, ph = attitude_split(r.q, ref.q, symmetry_axis(s.rotor.inertia), r.L, ref.L)
-    eq, ep = float(np.max(di)), float(np.max(ph))
+    eL, eq, ep = _true_errors(r, ref)
     est = r.error_estimate
     print(f"\nconstant_field 60 s: {r.steps} steps; true L {eL:.2e}, directions {eq:.2e}, phase {ep:.2e}; estimate "
           f"{est.L:.2e}, {est.attitude:.2e}, {est.phase:.2e}")
@@ -51,10 +48,7 @@ def test_lawson8_coarsens_to_spt_min_with_an_honest_estimate(name, T, most, befo
     ref = run(load_scene(name, overrides={**ov, "integrator": {"method": "lawson8", "steps_per_turn": 48}}),
               attitude=True, estimate=False)
     s = r.scene
-    assert np.allclose(r.t, ref.t, rtol=0, atol=1e-9)
-    eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1)) / np.max(np.linalg.norm(ref.L, axis=1)))
-    di, ph = attitude_split(r.q, ref.q, symmetry_axis(s.rotor.inertia), r.L, ref.L)
-    eq, ep = float(np.max(di)), float(np.max(ph))
+    eL, eq, ep = _true_errors(r, ref)
     est = r.error_estimate
     print(f"\n{name} {T:g} s: {r.steps} steps ({before} before); true L {eL:.2e}, directions {eq:.2e}, phase "
           f"{ep:.2e}; estimate {est.L:.2e}, {est.attitude:.2e}, {est.phase:.2e}")
@@ -88,3 +82,11 @@ def test_the_free_stepper_keeps_its_coarsest_step(rate, most):
         assert r.steps <= most
     assert est.attitude >= err and est.attitude <= 10 * max(err, 1e-11)  # honest
     assert est.met and err <= r.scene.accuracy.attitude
+
+
+def _true_errors(r, ref) -> tuple[float, float, float]:
+    """(L relative, directions rad, spin phase rad): run ``r``'s largest errors over its samples against ``ref``."""
+    assert np.allclose(r.t, ref.t, rtol=0, atol=1e-9)
+    eL = float(np.max(np.linalg.norm(r.L - ref.L, axis=1)) / np.max(np.linalg.norm(ref.L, axis=1)))
+    di, ph = attitude_split(r.q, ref.q, symmetry_axis(r.scene.rotor.inertia), r.L, ref.L)
+    return eL, float(np.max(di)), float(np.max(ph))
