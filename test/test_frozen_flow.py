@@ -82,7 +82,9 @@ def test_nutation_angle_drift_of_an_axisymmetric_rotor(J3):
 
 def test_shipped_scene_with_controller_and_outputs():
     """The default scene as shipped (spin-up law every 20 ms, 50 Hz output) through 10 s: auto takes frozen_flow,
-    and every output sample (spin, θ, torque) agrees with a lawson8 run."""
+    and every output sample (spin, θ, torque) agrees with a lawson8 run within the two runs' estimated errors of L
+    (since lawson8 may coarsen to 8 steps a turn, ErrorControl.coarsest, its own spin error is 4.0e-8 against lawson8
+    at 48 a turn, estimated 1.1e-7; frozen_flow's 8.9e-10, estimated 4.5e-9)."""
     sc = load_scene("spinup_thin_shell", overrides={"duration": 10.0})
     assert Simulator(sc)._method() == "frozen_flow"
     ff = run(sc)
@@ -92,7 +94,9 @@ def test_shipped_scene_with_controller_and_outputs():
     theta = float(np.max(np.abs(ff.theta - l8.theta)))
     torque = float(np.max(np.linalg.norm(ff.torque - l8.torque, axis=1)) / np.max(np.linalg.norm(l8.torque, axis=1)))
     print(f"  steps: frozen_flow {ff.steps}, lawson8 {l8.steps}")
-    report("spin rate over 10 s (relative)", spin, 1e-8)
+    est = ff.error_estimate.L + l8.error_estimate.L
+    assert est <= 2 * ff.scene.accuracy.rtol  # (each run within its tolerance by its own estimate)
+    report("spin rate over 10 s (relative; bound: the two runs' estimates of L)", spin, est)
     # (both hold the axis' cone, θ with it, to the scene's 1e-6 rad; measured 2.6e-8 with 581 frozen-flow steps)
     report("θ over 10 s (rad)", theta, 1e-7)
     report("torque samples (relative to the largest)", torque, 1e-4)
