@@ -318,7 +318,7 @@ def reference(case: Case, say=print) -> dict:
     s = _load(case)
     T = float(s.duration)
     c0 = time.process_time()
-    if s.torque_model == "none" and _axis(s) < 0 and not s.stators and not s.field and s.effects.magnetizable is None:
+    if s.torque_model == "none" and _axis(s) < 0 and not s.stators and not s.field and not s.effects.any:
         # its own error: the round-off of the phase (4 ulp of the angle the body turns through), L exact
         return {"exact": True, "ref_L": 0.0, "ref_att": 4 * np.finfo(float).eps * _spin_of(s) * T, "cpu": 0.0,
                 "how": "Jacobi solution (exact)"}
