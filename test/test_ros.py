@@ -21,7 +21,7 @@ pytest.importorskip("rclpy", reason="the ROS 2 wheels (pip install '.[ros]') are
 import gyro_sim  # noqa: E402
 from gyro_sim.io.recording import bag_info, read_bag  # noqa: E402
 from gyro_sim.io.rerun import rerun_bag  # noqa: E402
-from gyro_sim.testing import unique_domain  # noqa: E402  (a free ROS_DOMAIN_ID; the gyro_bench fixture uses it too)
+from gyro_sim.testing import release_domain, unique_domain  # noqa: E402  (a free ROS_DOMAIN_ID; the gyro_bench fixture uses it too)
 
 pytestmark = pytest.mark.ros
 PROBE = str(Path(__file__).with_name("ros_probe.py"))
@@ -60,6 +60,7 @@ class Procs:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+        release_domain(self.domain)  # (its nodes have ended: another session on the machine may take it)
 
 
 def _ns(ns):

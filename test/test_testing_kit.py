@@ -335,3 +335,34 @@ def test_teardown_when_the_test_body_raises_leaves_no_process(tmp_path):
             raise RuntimeError("the test body failed")
     left = [p for p in pids if not _gone(p)]
     assert not left, left
+
+
+def test_a_domain_claimed_by_another_process_is_not_picked(monkeypatch):
+    """Two CI suites side by side picked the same ROS_DOMAIN_ID in the second before either's first node joined it
+    (the check was for a DDS participant in it), and a probe of one read the other's simulator. Now a domain is
+    claimed machine-wide while in use: a process that holds domain d makes this one pass over it, even with no node
+    in it; released, it is free again for others."""
+    import itertools
+    import subprocess
+    import sys
+
+    from gyro_sim.apps import testing as kit
+
+    child = subprocess.Popen([sys.executable, "-c", "import sys; from gyro_sim.testing import unique_domain; "
+                              "print(unique_domain(), flush=True); sys.stdin.read()"],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        held = int(child.stdout.readline())
+        monkeypatch.setattr(kit, "_domains", itertools.count(held - 1))  # (this process would try `held` first)
+        d = kit.unique_domain()
+        assert d != held and 1 <= d <= 101
+        kit.release_domain(d)
+        again = kit._claim(d)  # (released: free for another process)
+        assert again is not None
+        again.close()
+    finally:
+        child.stdin.close()
+        child.wait(timeout=30)
+    after = kit._claim(held)  # (the child ended: its claim went with it)
+    assert after is not None
+    after.close()

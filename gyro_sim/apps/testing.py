@@ -70,6 +70,9 @@ _LOG_FORMAT = "[{severity}] [{time}] [{name}]: {message}"
 
 _domains = itertools.count((os.getpid() * 7) % 101)
 _used: set = set()
+#: the machine-wide claims this process holds, by domain: an abstract Unix socket named for the domain, bound while
+#: the domain is in use (released by :func:`release_domain` or when the process ends)
+_claims: dict = {}
 
 
 def _domain_is_free(d: int) -> bool:
@@ -83,16 +86,46 @@ def _domain_is_free(d: int) -> bool:
             return False
 
 
+def _claim(d: int) -> Optional[socket.socket]:
+    """Claim domain ``d`` on this machine (Linux's abstract socket namespace: the name goes with the process), or
+    None where another process holds it. Without a claim, two test sessions on one machine could pick the same
+    domain in the second or two before either's first node joined it, and each then saw the other's nodes (seen:
+    two CI suites side by side, a probe reading another session's simulator)."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    try:
+        s.bind(f"\0gyro_sim.ros_domain.{d}")
+    except OSError:
+        s.close()
+        return None
+    return s
+
+
 def unique_domain() -> int:
     """A ROS_DOMAIN_ID for one test: 1–101 (ROS's advice on Linux: their ports stay below the ephemeral
-    range 32768–60999, so no passing socket takes one), not used by this process and not in use on the
-    machine (the start is spread by the process id, so parallel sessions pick apart)."""
+    range 32768–60999, so no passing socket takes one), not used by this process, claimed by no other process of
+    this package on the machine (until :func:`release_domain` or this process's end) and with no DDS participant
+    in it (the start is spread by the process id, so parallel sessions pick apart)."""
     for _ in range(101):
         d = 1 + next(_domains) % 101
-        if d not in _used and _domain_is_free(d):
-            _used.add(d)
-            return d
+        if d in _used:
+            continue
+        claim = _claim(d)
+        if claim is None:
+            continue
+        if not _domain_is_free(d):
+            claim.close()
+            continue
+        _used.add(d)
+        _claims[d] = claim
+        return d
     raise RuntimeError("no free ROS domain id in 1-101")
+
+
+def release_domain(d: int) -> None:
+    """Give up this process's claim on domain ``d`` (its nodes have ended); this process does not use it again."""
+    claim = _claims.pop(d, None)
+    if claim is not None:
+        claim.close()
 
 
 def ros_env(domain: int, base: Optional[Mapping[str, str]] = None) -> dict:
