@@ -218,6 +218,36 @@ def test_a_wrapped_ctrl_c_that_no_command_handled_is_an_interruption(monkeypatch
         cli.main(["scenes"])
 
 
+def test_a_ctrl_c_that_c_code_turned_into_an_import_error_is_an_interruption(monkeypatch, capsys):
+    """CI: Ctrl-C while the run started landed in NumPy's start-up, whose C code replaced the KeyboardInterrupt with
+    `ImportError: PyCapsule_Import could not import module "datetime"` (no trace of it in the chain), and the command
+    ended in that traceback. Now an ImportError or RuntimeError after a Ctrl-C came to main's handler is an
+    interruption: one line, 130. Without a Ctrl-C the ImportError propagates."""
+    from gyro_sim.compiled import compile_watch
+
+    def _main(argv):
+        try:
+            signal.raise_signal(signal.SIGINT)  # (main's handler raises KeyboardInterrupt: C code replaces it)
+        except KeyboardInterrupt:
+            pass
+        raise ImportError('PyCapsule_Import could not import module "datetime"')
+
+    sigs = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    handlers = [signal.getsignal(s) for s in sigs]
+    monkeypatch.setitem(compile_watch._state, "sigint", False)
+    try:
+        monkeypatch.setattr(cli, "_main", lambda argv: (_ for _ in ()).throw(ImportError("a real one")))
+        with pytest.raises(ImportError, match="a real one"):
+            cli.main(["scenes"])
+        monkeypatch.setattr(cli, "_main", _main)
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # (as a command starts: main installs its own)
+        assert cli.main(["scenes"]) == 130
+    finally:
+        for s, h in zip(sigs, handlers, strict=True):
+            signal.signal(s, h)
+    assert capsys.readouterr().err == "interrupted (SIGINT)\n"
+
+
 def _wrapped_ctrl_c() -> RuntimeError:
     try:
         try:

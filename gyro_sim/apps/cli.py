@@ -38,7 +38,7 @@ from pathlib import Path
 
 from gyro_sim import __version__
 from gyro_sim.common.extras import MissingExtra
-from gyro_sim.compiled.compile_watch import hold_interrupts_while_compiling
+from gyro_sim.compiled.compile_watch import hold_interrupts_while_compiling, sigint_came
 from gyro_sim.io.signals import wrapped_interrupt
 from gyro_sim.apps.console import _write
 
@@ -292,8 +292,9 @@ def main(argv=None) -> int:
             status = _error(str(exc))
         except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM / SIGHUP where no command handled it (e.g. while
             status = _interrupted(exc)    # starting, or a second one while a stopped run is summarised)
-        except RuntimeError as exc:  # (a Ctrl-C inside a lazily imported module's class body: 3.11 wraps it)
-            interrupt = wrapped_interrupt(exc)
+        except (RuntimeError, ImportError) as exc:  # (a Ctrl-C inside an import: 3.11 wraps one in a class body's
+            # __set_name__, C code that imports (NumPy's PyCapsule_Import) replaces it with an ImportError)
+            interrupt = wrapped_interrupt(exc) or (KeyboardInterrupt() if sigint_came() else None)
             if interrupt is None:
                 raise
             status = _interrupted(interrupt)

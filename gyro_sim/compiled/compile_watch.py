@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Callable, Literal, Optional, TextIO
 
-__all__ = ["compile_seconds", "announce_compiles", "CompileClock", "hold_interrupts_while_compiling"]
+__all__ = ["compile_seconds", "announce_compiles", "CompileClock", "hold_interrupts_while_compiling", "sigint_came"]
 
 _lock = threading.Lock()
 _state: dict = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False,
@@ -76,6 +76,7 @@ class _HoldingHandler:
     default_int = True
 
     def __call__(self, signum, frame):
+        _state["sigint"] = True  # (sigint_came: an error it leaves behind is the interruption's)
         if _state["locked"] > 0:
             _state["held"] = True
             return
@@ -97,6 +98,13 @@ def hold_interrupts_while_compiling() -> None:
             signal.signal(signal.SIGINT, handler)
     except ValueError:  # (not the main thread)
         pass
+
+
+def sigint_came() -> bool:
+    """Whether a Ctrl-C came to the handler :func:`hold_interrupts_while_compiling` installed. A Ctrl-C inside C
+    code that imports a module can come out as another error with no trace of it (NumPy's start-up:
+    ``ImportError: PyCapsule_Import could not import module "datetime"``); the command's main asks this."""
+    return bool(_state.get("sigint"))
 
 
 def compile_seconds() -> float:
