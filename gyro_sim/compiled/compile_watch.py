@@ -18,7 +18,7 @@ __all__ = ["compile_seconds", "announce_compiles", "CompileClock", "hold_interru
 
 _lock = threading.Lock()
 _state: dict = {"depth": 0, "t0": 0.0, "total": 0.0, "installed": False, "announce": None, "locked": 0, "held": False,
-                "progress": None, "kernels": 0}
+                "progress": None, "kernels": 0, "sigint": False}
 
 
 def _install() -> None:
@@ -104,7 +104,7 @@ def sigint_came() -> bool:
     """Whether a Ctrl-C came to the handler :func:`hold_interrupts_while_compiling` installed. A Ctrl-C inside C
     code that imports a module can come out as another error with no trace of it (NumPy's start-up:
     ``ImportError: PyCapsule_Import could not import module "datetime"``); the command's main asks this."""
-    return bool(_state.get("sigint"))
+    return _state["sigint"]
 
 
 def compile_seconds() -> float:
