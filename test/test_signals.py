@@ -470,6 +470,96 @@ def test_a_node_whose_ros_teardown_hangs_still_exits_with_its_status(procs, tmp_
     assert bag_info(bag)["end_reason"] == "complete"
 
 
+
+#: a simulator node whose Node.destroy_node blocks in C code holding the GIL (libc's sleep through ctypes.PyDLL,
+#: which keeps the GIL): as the hang seen in 1 of 40 node exits under load, where no Python thread could run
+GIL_HELD_TEARDOWN = textwrap.dedent("""
+    import ctypes, sys, time
+    import rclpy.node
+    import gyro_sim.ros.common as common
+    common.TEARDOWN_BUDGET, common.TEARDOWN_LAST = 2.0, 1.0
+    def destroy_node(self):
+        print(f"destroy_node hangs from {time.monotonic():.3f}", file=sys.stderr, flush=True)
+        ctypes.PyDLL(None).sleep(1000)
+    rclpy.node.Node.destroy_node = destroy_node
+    from gyro_sim.ros.simulator_node import main
+    sys.argv = ["simulator"] + sys.argv[1:]
+    sys.exit(main())
+""")
+
+
+@needs_ros
+def test_a_node_whose_teardown_hangs_holding_the_gil_exits_with_its_status(procs, tmp_path):
+    """CI failure (test_lockstep_closed_loop_over_dds_equals_in_process): a simulator node finished its run, then
+    hung in rclpy's Node.destroy_node holding the GIL; the teardown timer (a Python thread) never ran and
+    faulthandler's watchdog ended the process with its own status 1, counted as a failed run. Now the GIL-free
+    watchdog ends it with the run's status (0), after the threads' tracebacks, TEARDOWN_LAST + TEARDOWN_DUMP s after
+    the budget (here 2 + 1 + 0.5 s)."""
+    bag = tmp_path / "bag"
+    log = tmp_path / "sim.log"
+    p = procs.start([sys.executable, "-c", GIL_HELD_TEARDOWN, "--ros-args", "-p", "scene:=spinup_thin_shell", "-p",
+                     "duration:=0.2", "-p", "mode:=freerun", "-p", f"record:={bag}"], log,
+                    env=ros_env(unique_domain()))
+    status = p.wait(timeout=START_TIMEOUT + END_TIMEOUT)
+    ended = time.monotonic()
+    text = log.read_text()
+    m = re.search(r"destroy_node hangs from (\S+)", text)
+    assert m, text
+    print(f"\nstatus {status}, {ended - float(m.group(1)):.2f} s after destroy_node hung (the exit is due 3.5 s "
+          "after the teardown began)")
+    assert status == 0, text
+    assert "Timeout (0:00:03)!" in text and "in destroy_node" in text  # (faulthandler's tracebacks, then the exit)
+    assert "the ROS teardown took more than" not in text  # (the Python timer never ran: the GIL was held)
+    from gyro_sim.io.recording import bag_info
+
+    assert bag_info(bag)["end_reason"] == "complete"
+
+
+#: the replay process (python -m gyro_sim.ros.replay) with the same destroy_node
+GIL_HELD_REPLAY = GIL_HELD_TEARDOWN.replace("simulator_node import main", "replay import main").replace(
+    '["simulator"]', '["replay"]')
+
+
+@needs_ros
+def test_a_replay_whose_teardown_hangs_holding_the_gil_exits_with_its_status(procs, tmp_path):
+    """The replay's teardown was not bounded at all: a destroy_node that hangs (as the nodes' 1 in 40 under load) left
+    the process running for good. Now it says its last line, then ends with its status (0) as a node does."""
+    from gyro_sim.engine.simulate import run
+    from gyro_sim.io.recording import record_result
+    from gyro_sim.scenes.scene import load_scene
+
+    bag = tmp_path / "bag"
+    record_result(run(load_scene("spinup_thin_shell"), duration=0.05), bag)
+    log = tmp_path / "replay.log"
+    p = procs.start([sys.executable, "-c", GIL_HELD_REPLAY, str(bag), "100", "--startup-timeout", "1"], log,
+                    env=ros_env(unique_domain()))
+    try:
+        status = p.wait(timeout=START_TIMEOUT)
+    except subprocess.TimeoutExpired as e:
+        raise AssertionError(f"the replay hung in its teardown: {log.read_text()}") from e
+    text = log.read_text()
+    print(f"\nstatus {status}; {[s for s in text.splitlines() if s.startswith('replay:')]}")
+    assert status == 0, text
+    assert re.search(r"^replay: published \d+ messages from ", text, re.M) and "in destroy_node" in text, text
+
+#: a process that blocks in C code holding the GIL after exit_later(0.3, STATUS)
+HELD_EXIT = textwrap.dedent("""
+    import ctypes, sys
+    from gyro_sim.ros.common import exit_later
+    assert exit_later(0.3, int(sys.argv[1]))
+    ctypes.PyDLL(None).sleep(1000)
+""")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="exit_later: a POSIX timer of Linux's libc")
+@pytest.mark.parametrize("status", [0, 1, 130, 143])
+def test_exit_later_ends_a_process_whose_gil_is_held_with_that_status(status):
+    """The GIL-free exit of bound_teardown: the process ends with the status given, its only thread in C code
+    holding the GIL (faulthandler's watchdog, which also needs no GIL, exits with 1 whatever the run's status)."""
+    r = subprocess.run([sys.executable, "-c", HELD_EXIT, str(status)], capture_output=True, text=True,
+                       timeout=END_TIMEOUT)
+    assert r.returncode == status, r.stderr
+
 # --- a signal handler takes no lock --------------------------------------------------------------
 
 #: a child that raises the stop signal in its main thread while that thread holds the stop event's lock (as when

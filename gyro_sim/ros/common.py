@@ -225,7 +225,9 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
     n (:func:`exit_status`), 2 a refused scene or parameter. The handlers stay installed until the node is torn
     down (a second signal while the bag is closed, or the node destroyed, changes nothing); run as a program
     (``args`` None), the process then ignores SIGINT/SIGTERM while it exits, so a late signal (e.g. the group's
-    Ctrl-C and a launcher's forwarded copy) cannot turn its status into -2 or -15.
+    Ctrl-C and a launcher's forwarded copy) cannot turn its status into -2 or -15. Its teardown is bounded
+    (:func:`bound_teardown`): one that hangs, even in C code holding the GIL, still ends the process with the loop's
+    status, at most :data:`TEARDOWN_BUDGET` + :data:`TEARDOWN_LAST` + :data:`TEARDOWN_DUMP` s after the loop.
 
     With ``GYRO_SIM_PARENT_PID`` in the environment (``gyro-sim run --ros`` sets it), the node watches its parent
     (:func:`watch_parent`) and stops as on SIGTERM when it is gone.
@@ -280,22 +282,32 @@ def node_main(who: str, build: Callable, loop: Callable, args=None, usage: Optio
 #: wall s a node process may take to tear down (flush its publishers, destroy the node, shut rclpy down) once its
 #: loop has ended and its bag is closed; beyond it the process exits with its status (bound_teardown). With the
 #: GIL-free watchdog's TEARDOWN_LAST s after it, within the launcher's CONTROLLER_GRACE (10 s): a teardown that hangs
-#: (seen in about 1 of 40 node exits under load in rclpy's Node.destroy_node, cause not found) ends the process
-#: itself instead of the launcher's SIGKILL (which it reports as a failure)
+#: (seen in about 1 of 40 node exits under load in rclpy's Node.destroy_node, the GIL held) ends the process itself
+#: instead of the launcher's SIGKILL (which it reports as a failure)
 TEARDOWN_BUDGET = 6.0
 TEARDOWN_LAST = 2.0
+#: wall s between the GIL-free watchdog's tracebacks (faulthandler) and its exit with the status (:func:`exit_later`)
+TEARDOWN_DUMP = 0.5
 
 
 def bound_teardown(who: str, status: Optional[int], budget: Optional[float] = None) -> threading.Timer:
     """Start a daemon timer that ends the process with ``status`` (1 if the loop did not return one) after
     ``budget`` s (default :data:`TEARDOWN_BUDGET`) and says so on stderr: a DDS teardown that hangs (a node seen
     alive 120 s after its ``done:`` line, its launcher killed, on a loaded CI machine) must not leave an orphan.
-    Everything the run owes (the bag, the done line) is written before the loop returns."""
+    Everything the run owes (the bag, the done line) is written before the loop returns; stdout and stderr are
+    flushed here.
+
+    A teardown that hangs in C code holding the GIL (rclpy's Node.destroy_node, 1 node exit in 40 under load) keeps
+    that timer from running: :data:`TEARDOWN_LAST` s after it a watchdog that needs no GIL prints every thread's
+    traceback on stderr (faulthandler) and, :data:`TEARDOWN_DUMP` s later, ends the process with the same
+    ``status`` (:func:`exit_later`; where it cannot be set up, faulthandler ends it, with status 1)."""
+    import faulthandler
     import os
     import sys
 
     budget = TEARDOWN_BUDGET if budget is None else budget
     code = 1 if status is None else int(status)
+    _flush_stdio()
 
     def _exit() -> None:
         try:
@@ -307,12 +319,69 @@ def bound_teardown(who: str, status: Optional[int], budget: Optional[float] = No
     timer = threading.Timer(budget, _exit)
     timer.daemon = True
     timer.start()
-    # and a watchdog that needs no GIL (a teardown seen spinning in rclpy's Node.destroy_node with the GIL held, so
-    # the timer above never ran): TEARDOWN_LAST s later, the threads' tracebacks on stderr and exit status 1
-    import faulthandler
-
-    faulthandler.dump_traceback_later(budget + TEARDOWN_LAST, exit=True)
+    hard = exit_later(budget + TEARDOWN_LAST + TEARDOWN_DUMP, code)
+    faulthandler.dump_traceback_later(budget + TEARDOWN_LAST, exit=not hard)
     return timer
+
+
+def _flush_stdio() -> None:
+    """Flush sys.stdout and sys.stderr (before an exit that skips Python's own: os._exit, :func:`exit_later`)."""
+    import sys
+
+    for f in (sys.stdout, sys.stderr):
+        try:
+            f.flush()
+        except (AttributeError, OSError, ValueError):  # (None, a closed or broken stream: nothing to save)
+            pass
+
+
+def exit_later(seconds: float, status: int) -> bool:
+    """End the process with exit ``status`` in ``seconds`` s (wall, CLOCK_MONOTONIC), whatever its threads do then:
+    a POSIX timer (timer_create, SIGEV_THREAD) whose own thread calls libc's ``_exit(status)``, no Python and no
+    GIL in it (a thread hung in C code holding the GIL cannot hold it up, unlike a threading.Timer; faulthandler's
+    watchdog also needs no GIL but always exits with status 1). Buffered stdio is not flushed. True if armed;
+    False where it cannot be (not Linux, no timer_create): then nothing is armed."""
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return False
+    funcs = None
+    for lib in (None, "librt.so.1"):  # (glibc < 2.34: the timer functions are librt's)
+        try:
+            so = ctypes.CDLL(lib)
+            funcs = so.timer_create, so.timer_settime, so._exit
+            break
+        except (OSError, AttributeError):
+            continue
+    if funcs is None:
+        return False
+    create, settime, _exit = funcs
+
+    class Timespec(ctypes.Structure):
+        _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+    class Itimerspec(ctypes.Structure):
+        _fields_ = [("it_interval", Timespec), ("it_value", Timespec)]
+
+    class Sigevent(ctypes.Structure):  # (Linux's struct sigevent, SIGEV_THREAD's members; 64 bytes and more)
+        _fields_ = [("sigev_value", ctypes.c_void_p), ("sigev_signo", ctypes.c_int), ("sigev_notify", ctypes.c_int),
+                    ("sigev_notify_function", ctypes.c_void_p), ("sigev_notify_attributes", ctypes.c_void_p),
+                    ("_pad", ctypes.c_byte * 64)]
+
+    sigev_thread, clock_monotonic = 2, 1
+    # the thread calls _exit(sigev_value): the union sigval is passed as _exit's int argument (its low 32 bits,
+    # the first integer register, as on x86-64 and arm64)
+    ev = Sigevent(sigev_value=int(status) & 0xFF or None, sigev_notify=sigev_thread,
+                  sigev_notify_function=ctypes.cast(_exit, ctypes.c_void_p).value)
+    timer = ctypes.c_void_p()
+    create.argtypes = [ctypes.c_int, ctypes.POINTER(Sigevent), ctypes.POINTER(ctypes.c_void_p)]
+    settime.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.POINTER(Itimerspec), ctypes.c_void_p]
+    if create(clock_monotonic, ctypes.byref(ev), ctypes.byref(timer)) != 0:
+        return False
+    whole = max(float(seconds), 1e-3)
+    when = Itimerspec(it_value=Timespec(int(whole), int((whole % 1.0) * 1e9)))
+    return settime(timer, 0, ctypes.byref(when), None) == 0
 
 
 def wait_for_matches(node, pubs, stop: threading.Event, timeout: float = 10.0, settle: float = 1.0,

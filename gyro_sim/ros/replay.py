@@ -10,24 +10,27 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 import rclpy
 from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 
 from gyro_sim.io.messages import QOS, TOPICS, node_topic
-from gyro_sim.ros.common import (StopEvent, exit_status, flush_publishers, message_class, qos_profile, stop_on_signals,
-                     wait_for_matches)
+from gyro_sim.ros.common import (StopEvent, bound_teardown, exit_status, flush_publishers, message_class, qos_profile,
+                                 stop_on_signals, wait_for_matches)
 from gyro_sim.io.signals import signal_name
 
 
 def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wait_for: int = 0,
-           startup_timeout: float = 10.0) -> int:
+           startup_timeout: float = 10.0, on_end: Callable[[int], None] | None = None) -> int:
     """Publish the bag's messages in log-time order, paced to the wall clock × ``rate``. Returns the count.
 
     Before the first message, discovery is given time to settle (:func:`~.common.wait_for_matches`, at most
     ``startup_timeout`` s), and at least ``wait_for`` subscriptions, summed over the bag's topics, must be
-    matched (unless that time runs out: then a warning, and the replay starts)."""
+    matched (unless that time runs out: then a warning, and the replay starts). ``on_end(count)`` is called once
+    the messages are published and flushed, before the node is destroyed (a process says its last line and
+    bounds its teardown there: :func:`main`)."""
     stop = stop or threading.Event()
     node = Node("gyro_replay")
     try:
@@ -65,6 +68,8 @@ def replay(bag: str, rate: float = 1.0, stop: threading.Event | None = None, wai
             # reliable writers still hold the last samples until the readers acknowledge them: a node
             # destroyed now would drop them (as `ros2 bag play --wait-for-all-acked` does, wait, bounded)
             flush_publishers(node, 5.0)
+            if on_end is not None:
+                on_end(n)
             return n
     finally:
         node.destroy_node()
@@ -103,11 +108,18 @@ def main(argv=None) -> int:
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     stop = StopEvent()
     restore = stop_on_signals(stop)
-    try:
-        n = replay(args.bag, args.rate, stop, args.wait_for_subscribers, args.startup_timeout)
+    status = 1
+
+    def end(n: int) -> None:
+        nonlocal status
         status = exit_status(stop)  # 130 / 143 when a signal ended it: scripts can tell it from a whole replay
         print(f"replay: published {n} messages from {args.bag}"
               + (f" (interrupted by {signal_name(status - 128)})" if status else ""), file=sys.stderr)
+        if argv is None:  # a process: a DDS teardown that hangs still ends it, with this status
+            bound_teardown("replay", status)
+
+    try:
+        replay(args.bag, args.rate, stop, args.wait_for_subscribers, args.startup_timeout, on_end=end)
         return status
     finally:
         restore()
