@@ -36,7 +36,7 @@ The run's own guard, where a state breaks anyway, is :func:`L_limit` (:class:`gy
 from __future__ import annotations
 
 import math
-from typing import Iterator, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -70,29 +70,33 @@ def _initial_rate(scene) -> float:
     return L0 / min(J)
 
 
-def _stator_values(scene, name: str, field: str) -> Iterator[tuple[str, float]]:
-    """(key, value) of every ``field`` ("current", A, or "rate", rad/s) the scene gives stator ``name``: its own,
-    its commands', the law's."""
+def _stator_values(scene, field: str) -> dict[str, list[tuple[str, float]]]:
+    """{stator name: [(key, value), ...]} of every ``field`` ("current", A, or "rate", rad/s) the scene gives each
+    stator: its own, its commands', the law's, in that order (one pass over the scene: 2,000 stators and 20,000
+    commands took 51 s when each stator scanned them all)."""
+    out: dict[str, list[tuple[str, float]]] = {}
     for i, s in enumerate(scene.stators):
-        if s.name == name:
-            yield f"stators.{i}.{field}", getattr(s, field)
+        out.setdefault(s.name, []).append((f"stators.{i}.{field}", getattr(s, field)))
     for i, c in enumerate(scene.commands):
-        if c.stator == name and getattr(c, field) is not None:
-            yield f"commands.{i}.{field}", getattr(c, field)
+        v = getattr(c, field)
+        if v is not None:
+            out.setdefault(c.stator, []).append((f"commands.{i}.{field}", v))
     for key, names, cur, rate in _law_values(scene.controller):
         v = cur if field == "current" else rate
-        if v is not None and name in names:
-            yield key, v
+        if v is not None:
+            for n in dict.fromkeys(names):
+                out.setdefault(n, []).append((key, v))
+    return out
 
 
-def _stator_currents(scene, name: str) -> Iterator[tuple[str, float]]:
-    """(key, current A) of every current the scene gives stator ``name``."""
-    return _stator_values(scene, name, "current")
+def _stator_currents(scene) -> dict[str, list[tuple[str, float]]]:
+    """{stator name: [(key, current A), ...]}: every current the scene gives each stator (:func:`_stator_values`)."""
+    return _stator_values(scene, "current")
 
 
-def _stator_rates(scene, name: str) -> Iterator[tuple[str, float]]:
-    """(key, rate rad/s) of every field rate the scene gives stator ``name``."""
-    return _stator_values(scene, name, "rate")
+def _stator_rates(scene) -> dict[str, list[tuple[str, float]]]:
+    """{stator name: [(key, rate rad/s), ...]}: every field rate the scene gives each stator."""
+    return _stator_values(scene, "rate")
 
 
 def _law_values(ctl) -> list[tuple[str, list, Optional[float], Optional[float]]]:
@@ -123,7 +127,8 @@ def _largest_field(scene) -> float:
     """T: the largest field amplitude one stator gets in the scene (b_j × its largest current), the general field
     terms' amplitudes included."""
     law_cur = law_limits(scene.controller)[1]
-    B = [s.coil_constant * max([s.current, law_cur] + [c for _, c in _stator_currents(scene, s.name)])
+    currents = _stator_currents(scene)
+    B = [s.coil_constant * max([s.current, law_cur] + [c for _, c in currents.get(s.name, ())])
          for s in scene.stators]
     B += [math.hypot(*f.real) + math.hypot(*f.imag) for f in scene.field]
     return max(B + [0.0])
@@ -167,6 +172,7 @@ def check_scene_limits(scene) -> None:
         raise ValueError(f"{key} = {_g(val)}: the initial body rate |L0|/J_min = {_g(om0)} rad/s is beyond "
                          f"MAX_RATE = {MAX_RATE:g} rad/s (the rim of a 1 mm rotor would move at 10 km/s)")
     # the absolute limits first (a value of 1e300 must not reach the defaults' arithmetic), then the stators' own
+    currents, rates = _stator_currents(scene), _stator_rates(scene)
     for i, s in enumerate(scene.stators):
         cap = MAX_FIELD / s.coil_constant
         if s.max_current is not None and s.max_current > cap:
@@ -174,22 +180,22 @@ def check_scene_limits(scene) -> None:
                              f"MAX_FIELD = {MAX_FIELD:g} T at coil_constant {_g(s.coil_constant)} T/A")
         if s.max_rate is not None and s.max_rate > MAX_RATE:
             raise ValueError(f"stators.{i}.max_rate = {_g(s.max_rate)} rad/s: beyond MAX_RATE = {MAX_RATE:g} rad/s")
-        for key, c in _stator_currents(scene, s.name):
+        for key, c in currents.get(s.name, ()):
             if c > cap:
                 raise ValueError(f"{key} = {_g(c)} A: stator {preview(s.name, 40)} would make b·I = "
                                  f"{_g(s.coil_constant * c)} T, "
                                  f"beyond MAX_FIELD = {MAX_FIELD:g} T ({_g(cap)} A at coil_constant "
                                  f"{_g(s.coil_constant)} T/A)")
-        for key, r in _stator_rates(scene, s.name):
+        for key, r in rates.get(s.name, ()):
             if abs(r) > MAX_RATE:
                 raise ValueError(f"{key} = {_g(r)} rad/s: beyond MAX_RATE = {MAX_RATE:g} rad/s")
     cur, rate = stator_limits(scene)
     for i, s in enumerate(scene.stators):
-        for key, c in _stator_currents(scene, s.name):
+        for key, c in currents.get(s.name, ()):
             if c > cur[i]:
                 raise ValueError(f"{key} = {_g(c)} A: beyond {_g(cur[i])} A, the largest current of stator "
                                  f"{preview(s.name, 40)} (stators.{i}.max_current)")
-        for key, r in _stator_rates(scene, s.name):
+        for key, r in rates.get(s.name, ()):
             if abs(r) > rate[i]:
                 raise ValueError(f"{key} = {_g(r)} rad/s: beyond {_g(rate[i])} rad/s, the largest field rate of stator "
                                  f"{preview(s.name, 40)} (stators.{i}.max_rate)")
