@@ -70,10 +70,11 @@ def _figure(pattern: str, text: str, default=float("nan")) -> float:
     return float(m.group(1)) if m else default
 
 
-def first_run(scene: str, tmp: Path) -> list[dict]:
-    """Process wall time of the README's first commands, cold (empty numba cache) and warm."""
+def first_run(scene: str, tmp: Path, ros_too: bool = True) -> list[dict]:
+    """Process wall time of the README's first commands, cold (empty numba cache) and warm: ``gyro-sim run`` and,
+    with ``ros_too``, ``gyro-sim run --ros``."""
     rows = []
-    for ros in (False, True):
+    for ros in (False, True) if ros_too else (False,):
         cache = str(tmp / f"numba_cache_{'ros' if ros else 'run'}")  # each starts empty
         for state in ("cold", "warm"):
             args = ["run", scene, "--quiet", "--out", str(tmp / f"out_{ros}_{state}")] + (["--ros"] if ros else [])
