@@ -79,14 +79,13 @@ def _replayed(r) -> list:
     return out
 
 
-def time_ours(scene, run=None) -> tuple:
+def time_ours(scene) -> tuple:
     """(CPU s, result) of ``run(scene)`` as shipped: one untimed run of the whole duration first (a kernel the run
     meets only late, e.g. once the spin-up passes a rate, is loaded from numba's cache there: not the run's cost),
-    then the least CPU of :data:`REPEATS` repeats (bench_core._timed_warm). ``run``: gyro_sim's by default."""
+    then the least CPU of :data:`REPEATS` repeats (bench_core._timed_warm)."""
     from gyro_sim.apps.bench_core import _timed_warm
+    from gyro_sim.engine.simulate import run
 
-    if run is None:
-        from gyro_sim.engine.simulate import run
     _, cpu, r, _ = _timed_warm(lambda: run(scene), math.inf, REPEATS)
     return cpu, r
 
