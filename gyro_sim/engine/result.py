@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -46,7 +46,7 @@ class RunResult:
     wall_time: float = 0.0  # s, the run's wall time less its numba compile time
     compile_time: float = 0.0  # s of numba compilation during the run (a first use; gyro_sim.compile_watch)
     steps: int = 0
-    commands: list = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
+    commands: Sequence = field(default_factory=list)  # (t s, names, currents A|None, rates rad/s|None) as applied
     averaged_segments: list = field(default_factory=list)  # (t0, t1) s run with the averaged model
     averaged_models: list = field(default_factory=list)  # the model of each stretch: "spin-up", "[M]", "[K]"
     averaged_rhs_evaluations: int = 0

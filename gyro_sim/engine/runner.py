@@ -13,6 +13,7 @@ import numpy as np
 from gyro_sim.compiled import effects
 from gyro_sim.compiled.compile_watch import CompileClock
 from gyro_sim.engine.budget import check_budget, check_run_size
+from gyro_sim.engine.command_log import CommandLog
 from gyro_sim.engine.model import body_rates, controller_period
 from gyro_sim.scenes.scene import sorted_union
 from gyro_sim.engine.result import RunResult
@@ -107,7 +108,7 @@ class Runner:
         self.rate = np.empty((n, k))
         self.phase = np.empty((n, k))
         self.row = 0
-        self.command_log: list = []  # every command applied: (t, names, currents|None, rates|None)
+        self.command_log = CommandLog()  # every command applied: (t, names, currents|None, rates|None)
         self._bi = 0  # index of the next break to reach
         self._ci = 0
         self.wall_time = 0.0  # s in advance(), numba compile time left out (compile_time)
@@ -145,8 +146,7 @@ class Runner:
 
     def take_commands(self) -> list:
         """The commands applied since the last call (or the start), ``(t, names, currents|None, rates|None)``."""
-        out, self.command_log[:] = list(self.command_log), []
-        return out
+        return self.command_log.take()
 
     def apply_scene_commands(self) -> None:
         """Apply the scene's scheduled commands due at or before the present time."""
@@ -303,7 +303,7 @@ class Runner:
         sim = self.sim
         sim.y[:], sim.t, sim.phase[:], sim.current[:], sim.rate[:], sim._nu_max = snap[:6]
         self.row, self._bi, self._ci = snap[6:9]
-        del self.command_log[snap[9]:]
+        self.command_log.truncate(snap[9])
 
     def advance_located(self, law, switching) -> slice:
         """:meth:`advance` to the next break, switching the law's commands at the exact zeros of its
@@ -361,7 +361,7 @@ class Runner:
         if self._base:
             raise RuntimeError("Runner.result: output rows were released (a streamed run); read its bag back")
         return run_result(self.scene, self.sim.terms, self.sim.attitude, self.samples(slice(0, self.row), euler=False),
-                          self.sim.steps, list(self.command_log), self.wall_time, self.compile_time,
+                          self.sim.steps, self.command_log.copy(), self.wall_time, self.compile_time,
                           None if self.failure is not None else self.error_estimate(), self.failure)
 
 

@@ -373,10 +373,9 @@ class TickLoop:
         names = self.names
         if not names:  # (a law that commands no stator, 'hold': nothing applied, nothing logged, as apply_commands)
             return
-        cs, rs = cur.tolist(), rate.tolist()
-        if self.kind == law_kernels.OFF:  # (the one law with a field left unchanged: its rates)
-            rs = [[None if v != v else v for v in row] for row in rs]
-        self.r.command_log.extend((t, list(names), c, v) for t, c, v in zip(times.tolist(), cs, rs))
+        # (arrays, made into tuples where the log is read: gyro_sim.engine.command_log; the law 'off' leaves a
+        # field's rate unchanged: NaN there, None in the log)
+        self.r.command_log.add_ticks(times, names, cur, rate, nan_is_none=self.kind == law_kernels.OFF)
 
 
 def tick_loop(r, law) -> Optional[TickLoop]:
