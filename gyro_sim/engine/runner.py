@@ -18,7 +18,7 @@ from gyro_sim.engine.model import body_rates, controller_period
 from gyro_sim.scenes.scene import sorted_union
 from gyro_sim.engine.result import RunResult
 from gyro_sim.engine.saving import output_times, run_result, sample_arrays
-from gyro_sim.engine.shadow import ErrorEstimator
+from gyro_sim.engine.shadow import VECTOR_SAMPLES, ErrorEstimator
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.common.stamps import stamp_ns
 from gyro_sim.scenes.accuracy import ErrorEstimate, is_legacy
@@ -250,8 +250,14 @@ class Runner:
         if self.sim.attitude:  # scalar code for the sound case (the same |L| bits as np.linalg.norm's: x*x + y*y + z*z
             # in that order); a sum that is not finite (a NaN or inf in the rows, or finite values whose sum
             # overflows) and a large |L| take the general path below
-            Ln1 = [math.sqrt(L0 * L0 + L1 * L1 + L2 * L2) for L0, L1, L2 in y[:, 0:3].tolist()]
-            if math.isfinite(float(y.sum()) + float(self.out_N[r].sum())) and not max(Ln1) > self.L_sound:
+            Ln1: "np.ndarray | list"
+            if sel.size > VECTOR_SAMPLES:  # (many samples: the same operations on columns)
+                Ln1 = np.sqrt(y[:, 0] * y[:, 0] + y[:, 1] * y[:, 1] + y[:, 2] * y[:, 2])
+                top = float(Ln1.max())
+            else:
+                Ln1 = [math.sqrt(L0 * L0 + L1 * L1 + L2 * L2) for L0, L1, L2 in y[:, 0:3].tolist()]
+                top = max(Ln1)
+            if math.isfinite(float(y.sum()) + float(self.out_N[r].sum())) and not top > self.L_sound:
                 return sel.size, Ln1
         if self.sim.attitude:  # (every column of y: L, q, the modes and effects' states)
             ok = np.isfinite(y).all(axis=1) & np.isfinite(self.out_N[r]).all(axis=1)

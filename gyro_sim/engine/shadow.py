@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 
 #: unit round-off of a double (the phases' floor: ErrorEstimate.round_off)
 ROUND_OFF = 2.0 ** -52
+#: more output samples than this in one call: ErrorEstimator.accumulate works on arrays (the same bits)
+VECTOR_SAMPLES = 32
 
 
 class ErrorEstimator:
@@ -101,7 +103,10 @@ class ErrorEstimator:
         over new sound output samples: their times ``sel`` (s), |L| ``Ln`` (N m s; an array or a list), torques
         ``N_rows`` (N m) and kinetic moments ``L_rows`` (N m s, inertial frame)."""
         # (sequential sums in time order, sample by sample: the same bits whether samples are breaks or not; scalar
-        # code, a few samples a call)
+        # code for a few samples a call, the same operations on arrays for many: a long run's chunks)
+        if sel.size > VECTOR_SAMPLES:
+            self._accumulate_arrays(sel, np.asarray(Ln, dtype=float), N_rows, L_rows)
+            return
         ts, Ls = sel.tolist(), (Ln.tolist() if isinstance(Ln, np.ndarray) else Ln)
         self.control.note_L(max(Ls))
         jmax = self.sim.terms.Jinv_max
@@ -125,6 +130,23 @@ class ErrorEstimator:
                 prev = t
             self._impulse, self._spin_dev = imp, dev
         self._turned, self._last_t = turned, prev
+
+    def _accumulate_arrays(self, sel: np.ndarray, Ln: np.ndarray, N_rows: np.ndarray, L_rows: np.ndarray) -> None:
+        """:meth:`accumulate` on arrays: each term as the scalar code computes it (the same IEEE operations in the
+        same order) and summed in time order (``np.add.accumulate``, sequential), so the sums' bits do not depend
+        on how the samples come in chunks."""
+        self.control.note_L(float(Ln.max()))
+        jmax = self.sim.terms.Jinv_max
+        dt = np.diff(sel, prepend=self._last_t)
+        om = Ln * jmax
+        self._turned = _running_sum(self._turned, om * dt)
+        if self.sim.mode_plan.kind not in (None, "thin_shell"):
+            N = np.linalg.norm(N_rows, axis=1)
+            dL = np.linalg.norm(np.diff(np.vstack([self._L_seen, L_rows]), axis=0), axis=1)
+            self._L_seen = L_rows[-1].copy()
+            self._impulse = _running_sum(self._impulse, np.maximum(N * dt, dL))
+            self._spin_dev = _running_sum(self._spin_dev, np.abs(om - self._om0) * dt)
+        self._last_t = float(sel[-1])
 
     def follow(self, tb: float, sel: np.ndarray) -> None:
         """At a check instant and at the end: advance the shadow to ``tb`` (:meth:`sync_shadow`), compare and maybe
@@ -285,6 +307,11 @@ class ErrorEstimator:
                              steps_phase=sp if att and sym else math.nan,
                              modes_phase=mp if att and sym else math.nan,
                              phase_tol=phase_tol if att else math.nan, round_off=ro)
+
+
+def _running_sum(start: float, terms: np.ndarray) -> float:
+    """``start`` plus ``terms`` added one by one in order (the bits of a Python loop ``start += term``)."""
+    return float(np.add.accumulate(np.concatenate(([start], terms)))[-1])
 
 
 def _holds(times: np.ndarray, t: float) -> bool:
