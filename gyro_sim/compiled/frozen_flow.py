@@ -185,9 +185,15 @@ def _epow(E, k):
     return (E * E).conjugate()
 
 
+#: what a pass of the frozen-flow step makes of K1 (the torque seen from the precession, _flow_pass): K1[1], which
+#: only the axial mean moment out[15] reads (the predictor passes: the next pass's Ω_r), K1[0], which only the step's
+#: end reads (the last pass), or both
+K1_MEAN, K1_END, K1_BOTH = 1, 2, 3
+
+
 @njit(cache=True)
 def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end,
-               out, K1, precess=True):
+               out, K1, precess=True, k1_part=K1_BOTH):
     """One pass of the step with L̄ = (Lx, Ly, Lz) (case): out[0:3] = ∫N ds, out[3:6] = ∫(h − s)N ds,
     out[6:10] = the attitude quaternion at s = h; E_end (nm, 3) complex receives the oscillating part of
     each mode at s = h. ``R`` is R0 (body → case), ``A`` (P, 3) the case phasors a_p = (Bre − iBim)e^{iν s},
@@ -195,7 +201,10 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     and e^{−h/τ_n} (EZ[k] = e^{Z[k] h}): a few exp calls a pass, not three per term. ``precess`` False: K1 is not
     made and out[15] takes ∫(h − s)N along e_a without the precession's part (K1's): a pass whose K1 and out[15]
     serve only Ω_r = (1/J_a − 1/J_t) L̄_a, which is zero for an isotropic body whatever L̄_a (its first two
-    passes: two thirds of their ∫ terms, the same bits)."""
+    passes: two thirds of their ∫ terms, the same bits). ``k1_part``: which of K1's rows the pass makes
+    (:data:`K1_MEAN`, :data:`K1_END`, :data:`K1_BOTH`): each pass reads only one of them (the predictors K1[1],
+    through out[15]; the last K1[0]), and each costs a third of the torque terms' work (the row left out stays zero;
+    without K1[1], out[15] is NaN)."""
     P = om.shape[0]
     Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
     xa0, xa1, xa2 = R[0, ax], R[1, ax], R[2, ax]  # symmetry axis in the case frame
@@ -287,12 +296,14 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 # N = ½ Σ (n e^{zs} + conj): each half times e^{−iΩ_p s}
                 k1, m1 = _integrals(zq - 1j * Op, ezq * Ep.conjugate(), h)
                 k2, m2 = _integrals(zq.conjugate() - 1j * Op, (ezq * Ep).conjugate(), h)
-                K1[0, 0] += 0.5 * (n0 * k1 + n0.conjugate() * k2)
-                K1[0, 1] += 0.5 * (n1 * k1 + n1.conjugate() * k2)
-                K1[0, 2] += 0.5 * (n2 * k1 + n2.conjugate() * k2)
-                K1[1, 0] += 0.5 * (n0 * m1 + n0.conjugate() * m2)
-                K1[1, 1] += 0.5 * (n1 * m1 + n1.conjugate() * m2)
-                K1[1, 2] += 0.5 * (n2 * m1 + n2.conjugate() * m2)
+                if k1_part & K1_END:
+                    K1[0, 0] += 0.5 * (n0 * k1 + n0.conjugate() * k2)
+                    K1[0, 1] += 0.5 * (n1 * k1 + n1.conjugate() * k2)
+                    K1[0, 2] += 0.5 * (n2 * k1 + n2.conjugate() * k2)
+                if k1_part & K1_MEAN:
+                    K1[1, 0] += 0.5 * (n0 * m1 + n0.conjugate() * m2)
+                    K1[1, 1] += 0.5 * (n1 * m1 + n1.conjugate() * m2)
+                    K1[1, 2] += 0.5 * (n2 * m1 + n2.conjugate() * m2)
     # attitude: q(h) = q(l̂, Ω_p h) ⊗ q0 ⊗ q(e_a, Ω_r h)
     cp, sp = math.cos(0.5 * Op * h), math.sin(0.5 * Op * h)
     cr, sr = math.cos(0.5 * Or * h), math.sin(0.5 * Or * h)
@@ -316,6 +327,9 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     g0, g1, g2 = _proj(0, l0, l1, l2, out[3] + 0j, out[4] + 0j, out[5] + 0j)
     if not precess:  # (only Ω_r = 0 · L̄_a reads it: L̄_a's part along l̂, its sign that of the whole)
         out[15] = y[0] * xa0 + y[1] * xa1 + y[2] * xa2 + (xa0 * g0.real + xa1 * g1.real + xa2 * g2.real) / h
+        return
+    if not k1_part & K1_MEAN:
+        out[15] = math.nan  # (not made: no pass after reads it)
         return
     k0, k1, k2 = _proj(1, l0, l1, l2, K1[1, 0], K1[1, 1], K1[1, 2])
     out[15] = (y[0] * xa0 + y[1] * xa1 + y[2] * xa2
@@ -346,18 +360,19 @@ def frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A
     Lx, Ly, Lz = y[0], y[1], y[2]
     # (an isotropic body's first two passes need no K1: they serve only its Ω_r, which is zero)
     pre = Ja != Jt
+    # (the predictor passes make K1[1] only, for out[15]; the last K1[0] only, for the step's end: the same bits)
     _flow_pass(Lx, Ly, Lz, math.nan, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S,
-               E_end, out, K1, pre)
+               E_end, out, K1, pre, K1_MEAN)
     a0, a1, a2, la1 = out[3], out[4], out[5], out[15]
     _flow_pass(Lx + a0 / h, Ly + a1 / h, Lz + a2 / h, la1, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam,
-               w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1, pre)
+               w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1, pre, K1_MEAN)
     # third pass at the mean of L right to O(h³): (I2_1 + 2 I2_2)/(3h) (the first pass, frozen at L0, misses
     # J_N N̄ h³/6 of ∫(h − s)N ds, the second, frozen at L0 + I2_1/h, has J_N N̄ h³/12 too much); the mean axial
     # moment alike. The flow's phases ∫Ω_p, ∫Ω_r then come from a mean right to third order: the spin and
     # precession phases err at O(h²) a run, not O(h) (docs/numerics.md)
     _flow_pass(Lx + (a0 + 2.0 * out[3]) / (3.0 * h), Ly + (a1 + 2.0 * out[4]) / (3.0 * h),
                Lz + (a2 + 2.0 * out[5]) / (3.0 * h), (la1 + 2.0 * out[15]) / 3.0, y, R, s, h, Bre, Bim, om, Jt, Ja,
-               ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1)
+               ax, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1, True, K1_END)
     y[0] = Lx + out[0]
     y[1] = Ly + out[1]
     y[2] = Lz + out[2]
