@@ -156,16 +156,17 @@ def _field_half(A, q, sg, z, ez, om_q, eo_q):
 
 
 @njit(cache=True, inline="always")
-def _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out):
-    """One product term of N = m × B, ½ x × a e^{zq s} (N·m): adds its ∫0^h to out[0:3] and its ∫0^h (h − s)
-    to out[3:6]; returns ½ x × a."""
+def _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out, end=True):
+    """One product term of N = m × B, ½ x × a e^{zq s} (N·m): adds its ∫0^h to out[0:3] (only with ``end``: a
+    pass whose ∫N the step's end reads) and its ∫0^h (h − s) to out[3:6]; returns ½ x × a."""
     i1, i2 = _integrals(zq, ezq, h)
     n0 = 0.5 * (x1 * a2 - x2 * a1)
     n1 = 0.5 * (x2 * a0 - x0 * a2)
     n2 = 0.5 * (x0 * a1 - x1 * a0)
-    out[0] += (n0 * i1).real
-    out[1] += (n1 * i1).real
-    out[2] += (n2 * i1).real
+    if end:
+        out[0] += (n0 * i1).real
+        out[1] += (n1 * i1).real
+        out[2] += (n2 * i1).real
     out[3] += (n0 * i2).real
     out[4] += (n1 * i2).real
     out[5] += (n2 * i2).real
@@ -204,8 +205,10 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     passes: two thirds of their ∫ terms, the same bits). ``k1_part``: which of K1's rows the pass makes
     (:data:`K1_MEAN`, :data:`K1_END`, :data:`K1_BOTH`): each pass reads only one of them (the predictors K1[1],
     through out[15]; the last K1[0]), and each costs a third of the torque terms' work (the row left out stays zero;
-    without K1[1], out[15] is NaN)."""
+    without K1[1], out[15] is NaN). Without K1_END (a predictor) the pass also leaves out what only the step's end
+    reads: out[0:3] (∫N ds) stays zero and E_end is not made."""
     P = om.shape[0]
+    end = (k1_part & K1_END) != 0  # (the pass whose ∫N, modes and K1[0] the step's end reads)
     Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
     xa0, xa1, xa2 = R[0, ax], R[1, ax], R[2, ax]  # symmetry axis in the case frame
     if Ln > 0.0:
@@ -245,9 +248,10 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                     S[n, 0] += g * c0
                     S[n, 1] += g * c1
                     S[n, 2] += g * c2
-                    E_end[n, 0] += g * c0 * ef
-                    E_end[n, 1] += g * c1 * ef
-                    E_end[n, 2] += g * c2 * ef
+                    if end:  # (the modes' state at s = h: the step's end reads the last pass's)
+                        E_end[n, 0] += g * c0 * ef
+                        E_end[n, 1] += g * c1 * ef
+                        E_end[n, 2] += g * c2 * ef
                 chi *= c_m
                 u0 += chi * c0
                 u1 += chi * c1
@@ -290,7 +294,7 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
         for q in range(P):
             for sg in range(2):
                 a0, a1, a2, zq, ezq = _field_half(A, q, sg, Z[j], EZ[j], om[q], EO[q])
-                n0, n1, n2 = _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out)
+                n0, n1, n2 = _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out, end)
                 if not precess:
                     continue
                 # N = ½ Σ (n e^{zs} + conj): each half times e^{−iΩ_p s}
