@@ -206,98 +206,77 @@ def test_auto_counts_the_field_phasors_in_the_frozen_flow_cost():
         assert method() == "lawson8"
 
 
-def test_an_isotropic_body_skips_the_precession_integrals_of_its_first_passes_with_the_same_bits():
-    """Issue 28 (constant_field 10 µs a step): an isotropic body's Ω_r is zero whatever its mean axial moment, so the
-    first two passes of its frozen-flow step need not integrate the torque seen from the precession (K1): two thirds
-    of their ∫ terms (measured 7.5 → 5.4 µs a step). The step must keep every bit of the three full passes."""
+def _step_cases(seed: int, bodies):
+    """Random frozen-flow steps: for each (J_t, J_a) of ``bodies`` and (phasors P, modes nm) of (1, 1), (2, 3),
+    the step's inputs (a dict); the symmetry axis is z."""
+    rng = np.random.default_rng(seed)
+    for Jt, Ja in bodies:
+        for P, nm in ((1, 1), (2, 3)):
+            q = rng.normal(size=4)
+            yield dict(Bre=rng.normal(size=(P, 3)) * 5e-3, Bim=rng.normal(size=(P, 3)) * 5e-3,
+                       om=np.array([0.0, 300.0][:P]), lam=1.0 / (2.6e-4 * (1 + np.arange(nm))), w=rng.normal(size=nm),
+                       c_m=0.3, tail=1e-5, h=3e-3, s=0.25, Jt=Jt, Ja=Ja, P=P, nm=nm,
+                       y0=np.concatenate([rng.normal(size=3) * 1e-3 * Jt / 5.592e-6, q / np.linalg.norm(q),
+                                          rng.normal(size=3 * nm) * 1e-3]))
+
+
+def _work(P: int, nm: int) -> tuple:
+    """The frozen-flow step's work arrays (A, X, Z, EZ, EO, S, E_end, out, R, K1)."""
+    k = 9 * (P + nm)
+    return (np.empty((P, 3), np.complex128), np.empty((k, 3), np.complex128), np.empty(k, np.complex128),
+            np.empty(k, np.complex128), np.empty(P, np.complex128), np.empty((nm, 3), np.complex128),
+            np.empty((nm, 3), np.complex128), np.empty(16), np.empty((3, 3)), np.empty((2, 3), np.complex128))
+
+
+def _step_and_full_passes(c: dict) -> tuple:
+    """Case ``c`` (:func:`_step_cases`) through the frozen-flow step, and through the three passes in full
+    (precession integrals and both rows of K1 in each, as the step made them before issue 28), from the step's own
+    phasors A, e^{iνh} EO and R0 (the kernel's bits). Returns (y after the step, its out and K1; the full passes' out,
+    K1, S and E_end)."""
     import math
 
     from gyro_sim.compiled import frozen_flow as ff
 
-    rng = np.random.default_rng(28)
-    for J in (5.592e-6, 1.0):
-        for P, nm in ((1, 1), (2, 3)):
-            Bre, Bim = rng.normal(size=(P, 3)) * 5e-3, rng.normal(size=(P, 3)) * 5e-3
-            om = np.array([0.0, 300.0][:P])
-            lam, w = 1.0 / (2.6e-4 * (1 + np.arange(nm))), rng.normal(size=nm)
-            c_m, tail, h, s = 0.3, 1e-5, 3e-3, 0.25
-            q = rng.normal(size=4)
-            y0 = np.concatenate([rng.normal(size=3) * 1e-3 * J / 5.592e-6, q / np.linalg.norm(q),
-                                 rng.normal(size=3 * nm) * 1e-3])
-            k = 9 * (P + nm)
+    y0, h, P, nm = c["y0"], c["h"], c["P"], c["nm"]
+    consts = (c["Bre"], c["Bim"], c["om"], c["Jt"], c["Ja"], 2, c["lam"], c["w"], c["c_m"], c["tail"], nm)
+    y = y0.copy()
+    A, X, Z, EZ, EO, S, E_end, out, R, K1 = _work(P, nm)
+    ff.frozen_flow_step(y, c["s"], h, *consts, A, X, Z, EZ, EO, S, E_end, out, R, K1)
+    new_out, new_K1 = out.copy(), K1.copy()
+    _, X, Z, EZ, _, S, E_end, out, _, K1 = _work(P, nm)
+    args = (y0, R, c["s"], h, *consts, A, X, Z, EZ, EO, S, E_end, out, K1, True, ff.K1_BOTH)
+    L0 = y0[0:3]
+    ff._flow_pass(*L0, math.nan, *args)
+    a, la1 = out[3:6].copy(), out[15]
+    ff._flow_pass(*(L0 + a / h), la1, *args)
+    ff._flow_pass(*(L0 + (a + 2.0 * out[3:6]) / (3.0 * h)), (la1 + 2.0 * out[15]) / 3.0, *args)
+    return y, new_out, new_K1, out, K1, S, E_end
 
-            def work(P=P, k=k, nm=nm):
-                return (np.empty((P, 3), np.complex128), np.empty((k, 3), np.complex128), np.empty(k, np.complex128),
-                        np.empty(k, np.complex128), np.empty(P, np.complex128), np.empty((nm, 3), np.complex128),
-                        np.empty((nm, 3), np.complex128), np.empty(16), np.empty((3, 3)),
-                        np.empty((2, 3), np.complex128))
 
-            y = y0.copy()
-            A, X, Z, EZ, EO, S, E_end, out, R, K1 = work()
-            ff.frozen_flow_step(y, s, h, Bre, Bim, om, J, J, 2, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end,
-                                out, R, K1)
-            # the three passes in full (precess=True), as the step made them before
-            A, X, Z, EZ, EO, S, E_end, out, R, K1 = work()
-            EO[:] = np.cos(om * h) + 1j * np.sin(om * h)
-            for p in range(P):
-                A[p] = (Bre[p] - 1j * Bim[p]) * np.exp(1j * om[p] * s)
-            R[:] = quat_to_matrix(y0[3:7])
-            args = (y0, R, s, h, Bre, Bim, om, J, J, 2, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1, True)
-            L0 = y0[0:3]
-            ff._flow_pass(*L0, math.nan, *args)
-            a, la1 = out[3:6].copy(), out[15]
-            ff._flow_pass(*(L0 + a / h), la1, *args)
-            ff._flow_pass(*(L0 + (a + 2.0 * out[3:6]) / (3.0 * h)), (la1 + 2.0 * out[15]) / 3.0, *args)
-            assert np.array_equal(y[0:3], L0 + out[0:3])
-            # (the modes' end state from the same particular solutions; NumPy's arithmetic here, not the kernel's)
-            dec = np.exp(-lam * h)
-            modes = dec[:, None] * (y0[7:].reshape(nm, 3) - S.real) + E_end.real
-            assert np.allclose(y[7:], modes.ravel(), rtol=1e-13, atol=0)
+def test_an_isotropic_body_skips_the_precession_integrals_of_its_first_passes_with_the_same_bits():
+    """Issue 28 (constant_field 10 µs a step): an isotropic body's Ω_r is zero whatever its mean axial moment, so the
+    first two passes of its frozen-flow step need not integrate the torque seen from the precession (K1): two thirds
+    of their ∫ terms (measured 7.5 → 5.4 µs a step). The step must keep every bit of the three full passes."""
+    for c in _step_cases(28, ((5.592e-6, 5.592e-6), (1.0, 1.0))):
+        y, _, _, out, _, S, E_end = _step_and_full_passes(c)
+        y0, nm = c["y0"], c["nm"]
+        assert np.array_equal(y[0:3], y0[0:3] + out[0:3])
+        # (the modes' end state from the same particular solutions; NumPy's arithmetic here, not the kernel's)
+        dec = np.exp(-c["lam"] * c["h"])
+        modes = dec[:, None] * (y0[7:].reshape(nm, 3) - S.real) + E_end.real
+        assert np.allclose(y[7:], modes.ravel(), rtol=1e-13, atol=0)
 
 
 def test_each_pass_makes_only_the_precession_integrals_it_reads_with_the_same_bits():
     """Each pass of an axisymmetric body's frozen-flow step used to make both rows of K1 (the torque seen from the
     precession), though the two predictor passes read only K1[1] (through the mean axial moment out[15]) and the last
-    only K1[0] (the step's end): a third of each pass's work on the torque terms (the default scene's step 8.7 µs
-    before). The passes must keep every bit the step reads: L, the end's inputs out[0:15] and K1[0]."""
+    only K1[0] (the step's end); and ∫N ds and the modes' end state, which the step reads of the last pass only: a
+    third of each pass's work on the torque terms (the default scene's step 8.7 µs before). The passes must keep every
+    bit the step reads: L, the end's inputs out[0:15] and K1[0]."""
     import math
 
-    from gyro_sim.compiled import frozen_flow as ff
-
-    rng = np.random.default_rng(29)
-    for Jt, Ja in ((5.592e-6, 8.4e-6), (1.0, 0.7)):
-        for P, nm in ((1, 1), (2, 3)):
-            Bre, Bim = rng.normal(size=(P, 3)) * 5e-3, rng.normal(size=(P, 3)) * 5e-3
-            om = np.array([0.0, 300.0][:P])
-            lam, w = 1.0 / (2.6e-4 * (1 + np.arange(nm))), rng.normal(size=nm)
-            c_m, tail, h, s = 0.3, 1e-5, 3e-3, 0.25
-            q = rng.normal(size=4)
-            y0 = np.concatenate([rng.normal(size=3) * 1e-3 * Jt / 5.592e-6, q / np.linalg.norm(q),
-                                 rng.normal(size=3 * nm) * 1e-3])
-            k = 9 * (P + nm)
-
-            def work(P=P, k=k, nm=nm):
-                return (np.empty((P, 3), np.complex128), np.empty((k, 3), np.complex128), np.empty(k, np.complex128),
-                        np.empty(k, np.complex128), np.empty(P, np.complex128), np.empty((nm, 3), np.complex128),
-                        np.empty((nm, 3), np.complex128), np.empty(16), np.empty((3, 3)),
-                        np.empty((2, 3), np.complex128))
-
-            y = y0.copy()
-            A, X, Z, EZ, EO, S, E_end, out, R, K1 = work()
-            ff.frozen_flow_step(y, s, h, Bre, Bim, om, Jt, Ja, 2, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end,
-                                out, R, K1)
-            new_out, new_K1 = out.copy(), K1.copy()
-            # the three passes with both rows of K1, as the step made them before (from the step's own phasors A,
-            # e^{iνh} EO and R0: the kernel's bits)
-            A, EO, R = A.copy(), EO.copy(), R.copy()
-            _, X, Z, EZ, _, S, E_end, out, _, K1 = work()
-            args = (y0, R, s, h, Bre, Bim, om, Jt, Ja, 2, lam, w, c_m, tail, nm, A, X, Z, EZ, EO, S, E_end, out, K1,
-                    True, ff.K1_BOTH)
-            L0 = y0[0:3]
-            ff._flow_pass(*L0, math.nan, *args)
-            a, la1 = out[3:6].copy(), out[15]
-            ff._flow_pass(*(L0 + a / h), la1, *args)
-            ff._flow_pass(*(L0 + (a + 2.0 * out[3:6]) / (3.0 * h)), (la1 + 2.0 * out[15]) / 3.0, *args)
-            assert np.array_equal(y[0:3], L0 + out[0:3])
-            assert np.array_equal(new_out[0:15], out[0:15]) and np.array_equal(new_K1[0], K1[0])
-            assert math.isnan(new_out[15]) and not np.any(new_K1[1])  # (not made: nothing reads them)
+    for c in _step_cases(29, ((5.592e-6, 8.4e-6), (1.0, 0.7))):
+        y, new_out, new_K1, out, K1, _, _ = _step_and_full_passes(c)
+        assert np.array_equal(y[0:3], c["y0"][0:3] + out[0:3])
+        assert np.array_equal(new_out[0:15], out[0:15]) and np.array_equal(new_K1[0], K1[0])
+        assert math.isnan(new_out[15]) and not np.any(new_K1[1])  # (not made: nothing reads them)
