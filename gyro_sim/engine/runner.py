@@ -251,8 +251,9 @@ class Runner:
             # in that order); a sum that is not finite (a NaN or inf in the rows, or finite values whose sum
             # overflows) and a large |L| take the general path below
             Ln1: "np.ndarray | list"
-            if sel.size > VECTOR_SAMPLES:  # (many samples: the same operations on columns)
-                Ln1 = np.sqrt(y[:, 0] * y[:, 0] + y[:, 1] * y[:, 1] + y[:, 2] * y[:, 2])
+            if sel.size > VECTOR_SAMPLES:  # (many samples: the same operations on columns; quiet, as floats are)
+                with np.errstate(over="ignore", invalid="ignore"):
+                    Ln1 = np.sqrt(y[:, 0] * y[:, 0] + y[:, 1] * y[:, 1] + y[:, 2] * y[:, 2])
                 top = float(Ln1.max())
             else:
                 Ln1 = [math.sqrt(L0 * L0 + L1 * L1 + L2 * L2) for L0, L1, L2 in y[:, 0:3].tolist()]
