@@ -3,3 +3,6 @@ lawson8 / ETDRK4 / free-rotor steppers, the frozen-flow and quasi-static-flow st
 and where numba compiles (``compile_watch``). May import ``gyro_sim.physics`` and ``gyro_sim.common``.
 A new stepper is one file here.
 """
+from gyro_sim.compiled.cache_stamp import install as _install_cache_stamp
+
+_install_cache_stamp()  # (before any kernel module: their caches follow every kernel source, cache_stamp)

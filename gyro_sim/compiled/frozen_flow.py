@@ -186,6 +186,159 @@ def _epow(E, k):
     return (E * E).conjugate()
 
 
+@njit(cache=True, inline="always")
+def _shifted(zq, ezq, Op, Ep, h, precess):
+    """∫0^h and ∫0^h (h − s) of e^{(zq + iμΩ_p)s} for μ = −2 … 2 (ezq = e^{zq h}, Ep = e^{iΩ_p h}): ten complex
+    numbers, (I1, I2) at μ = −2, −1, 0, 1, 2; without ``precess`` only μ = −1 … 1 (the others zero)."""
+    Epc = Ep.conjugate()
+    a1, a2 = _integrals(complex(zq.real, zq.imag - Op), ezq * Epc, h)
+    b1, b2 = _integrals(zq, ezq, h)
+    c1, c2 = _integrals(complex(zq.real, zq.imag + Op), ezq * Ep, h)
+    if not precess:
+        return 0j, 0j, a1, a2, b1, b2, c1, c2, 0j, 0j
+    m1, m2 = _integrals(complex(zq.real, zq.imag - 2.0 * Op), ezq * (Epc * Epc), h)
+    p1, p2 = _integrals(complex(zq.real, zq.imag + 2.0 * Op), ezq * (Ep * Ep), h)
+    return m1, m2, a1, a2, b1, b2, c1, c2, p1, p2
+
+
+@njit(cache=True, inline="always")
+def _add_product(n0, n1, n2, i1, i2, lo1, lo2, hi1, hi2, out, K1, end, precess, k1_part):
+    """Add one product term n e^{zs} (n = ½ x × a, N·m) of the torque: its ∫ (i1: only with ``end``) and
+    ∫(h − s) (i2) to out[0:6], and to K1 the precession's view of it, ½(n e^{zs} + conj) e^{−iΩ_p s}: n times the ∫
+    one shift below (lo1, lo2) and the conjugate of n times the ∫ one shift above (hi1, hi2)."""
+    if end:
+        out[0] += (n0 * i1).real
+        out[1] += (n1 * i1).real
+        out[2] += (n2 * i1).real
+    out[3] += (n0 * i2).real
+    out[4] += (n1 * i2).real
+    out[5] += (n2 * i2).real
+    if not precess:
+        return
+    if k1_part & K1_END:
+        K1[0, 0] += 0.5 * (n0 * lo1 + (n0 * hi1).conjugate())
+        K1[0, 1] += 0.5 * (n1 * lo1 + (n1 * hi1).conjugate())
+        K1[0, 2] += 0.5 * (n2 * lo1 + (n2 * hi1).conjugate())
+    if k1_part & K1_MEAN:
+        K1[1, 0] += 0.5 * (n0 * lo2 + (n0 * hi2).conjugate())
+        K1[1, 1] += 0.5 * (n1 * lo2 + (n1 * hi2).conjugate())
+        K1[1, 2] += 0.5 * (n2 * lo2 + (n2 * hi2).conjugate())
+
+
+@njit(cache=True, inline="always")
+def _half_cross(x0, x1, x2, a0, a1, a2):
+    """½ x × a (complex 3-vectors)."""
+    return 0.5 * (x1 * a2 - x2 * a1), 0.5 * (x2 * a0 - x0 * a2), 0.5 * (x0 * a1 - x1 * a0)
+
+
+@njit(cache=True, inline="always")
+def _family(X, j, zb, ezb, A, q, sg, om_q, eo_q, Op, Ep, h, out, K1, end, precess, k1_part):
+    """The products with half sg of field phasor q of a family of three moment terms X[j + m3 + 1] e^{(zb + im3Ω_p)s}
+    (m3 = −1, 0, 1; ezb = e^{zb h}): five ∫ serve its three terms and their views from the precession
+    (:func:`_add_product`), where each term alone took three."""
+    a0, a1, a2, zq, ezq = _field_half(A, q, sg, zb, ezb, om_q, eo_q)
+    m1, m2, a1_, a2_, b1, b2, c1, c2, p1, p2 = _shifted(zq, ezq, Op, Ep, h, precess)
+    n0, n1, n2 = _half_cross(X[j, 0], X[j, 1], X[j, 2], a0, a1, a2)  # m3 = −1
+    _add_product(n0, n1, n2, a1_, a2_, m1, m2, b1, b2, out, K1, end, precess, k1_part)
+    n0, n1, n2 = _half_cross(X[j + 1, 0], X[j + 1, 1], X[j + 1, 2], a0, a1, a2)  # m3 = 0
+    _add_product(n0, n1, n2, b1, b2, a1_, a2_, c1, c2, out, K1, end, precess, k1_part)
+    n0, n1, n2 = _half_cross(X[j + 2, 0], X[j + 2, 1], X[j + 2, 2], a0, a1, a2)  # m3 = 1
+    _add_product(n0, n1, n2, c1, c2, b1, b2, p1, p2, out, K1, end, precess, k1_part)
+
+
+#: from this many eddy modes on, a pass sums the modes' free-decay terms mode by mode before the products with the
+#: field (_decay_sums): each term is linear in its mode's mismatch D_n, so per mode only its five ∫ remain, against
+#: three terms' projections and products; below, the fixed work of the sums costs more than it saves
+MODE_SUM_MIN = 4
+
+
+@njit(cache=True)
+def _decay_sums(X, EZ, k, nm, lam, R, ax, l0, l1, l2, A, om, EO, Op, Or, Ep, Er, h, out, K1, end, precess, k1_part):
+    """The products of the modes' free decay with the field, summed over the modes first: the term of mode n,
+    (m2, m3) is P_m3(l̂) R0 P_m2(e_a) D_n e^{(−1/τ_n + i(m3Ω_p + m2Ω_r))s} (D_n = X[k + n] real, e^{−h/τ_n} =
+    EZ[k + n]), so for each (m2, field half, shift μ) W = R0 P_m2(e_a) Σ_n D_n ∫ e^{(…)s} is one vector, and the
+    products are those of P_m3(l̂) W: what :func:`_family` adds term by term, to the same sums."""
+    e0 = 1.0 if ax == 0 else 0.0
+    e1 = 1.0 if ax == 1 else 0.0
+    e2 = 1.0 if ax == 2 else 0.0
+    lo, hi = (-2, 3) if precess else (-1, 2)
+    far = True
+    for n in range(nm):
+        far = far and lam[n] * h >= 1e-2
+    for m2 in range(-1, 2):
+        for q in range(om.shape[0]):
+            for sg in range(2):
+                a0, a1, a2, zq, ezq = _field_half(A, q, sg, complex(0.0, m2 * Or), _epow(Er, m2), om[q], EO[q])
+                for mu in range(lo, hi):
+                    zi = zq.imag + mu * Op
+                    em = ezq * _epow(Ep, mu)
+                    s10 = s11 = s12 = s20 = s21 = s22 = 0j
+                    for n in range(nm):
+                        if far:  # (|zh| ≥ h/τ_n ≥ 1e-2 for every mode: _integrals' closed form, without its test)
+                            d = 1.0 / (lam[n] * lam[n] + zi * zi)
+                            rz = complex(-lam[n] * d, -zi * d)  # 1/z
+                            i1 = (EZ[k + n].real * em - 1.0) * rz
+                            i2 = (i1 - h) * rz
+                        else:
+                            i1, i2 = _integrals(complex(-lam[n], zi), EZ[k + n].real * em, h)
+                        d0, d1, d2 = X[k + n, 0].real, X[k + n, 1].real, X[k + n, 2].real
+                        if end:
+                            s10 += d0 * i1
+                            s11 += d1 * i1
+                            s12 += d2 * i1
+                        s20 += d0 * i2
+                        s21 += d1 * i2
+                        s22 += d2 * i2
+                    W0, W1, W2 = _body_to_case(m2, e0, e1, e2, s20, s21, s22, R)  # R0 P_m2(e_a) Σ D_n ∫(h − s)
+                    V0, V1, V2 = _body_to_case(m2, e0, e1, e2, s10, s11, s12, R)  # R0 P_m2(e_a) Σ D_n ∫
+                    if -1 <= mu <= 1:  # the term m3 = μ itself
+                        n0, n1, n2 = _seen(mu, l0, l1, l2, W0, W1, W2, a0, a1, a2, False)
+                        out[3] += n0.real
+                        out[4] += n1.real
+                        out[5] += n2.real
+                        if end:
+                            n0, n1, n2 = _seen(mu, l0, l1, l2, V0, V1, V2, a0, a1, a2, False)
+                            out[0] += n0.real
+                            out[1] += n1.real
+                            out[2] += n2.real
+                    if not precess:
+                        continue
+                    # the view from the precession: the term m3 = μ + 1 times this shift, the conjugate of m3 = μ − 1's
+                    for side in range(2):
+                        m3, cj = mu + 1 - 2 * side, side == 1
+                        if m3 < -1 or m3 > 1:
+                            continue
+                        if k1_part & K1_END:
+                            n0, n1, n2 = _seen(m3, l0, l1, l2, V0, V1, V2, a0, a1, a2, cj)
+                            K1[0, 0] += 0.5 * n0
+                            K1[0, 1] += 0.5 * n1
+                            K1[0, 2] += 0.5 * n2
+                        if k1_part & K1_MEAN:
+                            n0, n1, n2 = _seen(m3, l0, l1, l2, W0, W1, W2, a0, a1, a2, cj)
+                            K1[1, 0] += 0.5 * n0
+                            K1[1, 1] += 0.5 * n1
+                            K1[1, 2] += 0.5 * n2
+
+
+@njit(cache=True, inline="always")
+def _body_to_case(m2, e0, e1, e2, s0, s1, s2, R):
+    """R0 P_m2(e_a) s: a body-frame vector's part m2 about the symmetry axis e_a, in the case frame."""
+    c0, c1, c2 = _proj(m2, e0, e1, e2, s0, s1, s2)
+    return (R[0, 0] * c0 + R[0, 1] * c1 + R[0, 2] * c2, R[1, 0] * c0 + R[1, 1] * c1 + R[1, 2] * c2,
+            R[2, 0] * c0 + R[2, 1] * c1 + R[2, 2] * c2)
+
+
+@njit(cache=True, inline="always")
+def _seen(m, l0, l1, l2, W0, W1, W2, a0, a1, a2, cj):
+    """½ P_m(l̂)W × a (its conjugate with ``cj``): the product of a case-frame moment's part m about l̂ with a field
+    half."""
+    x0, x1, x2 = _proj(m, l0, l1, l2, W0, W1, W2)
+    n0, n1, n2 = _half_cross(x0, x1, x2, a0, a1, a2)
+    if cj:
+        return n0.conjugate(), n1.conjugate(), n2.conjugate()
+    return n0, n1, n2
+
+
 #: what a pass of the frozen-flow step makes of K1 (the torque seen from the precession, _flow_pass): K1[1], which
 #: only the axial mean moment out[15] reads (the predictor passes: the next pass's Ω_r), K1[0], which only the step's
 #: end reads (the last pass), or both
@@ -199,14 +352,17 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
     out[6:10] = the attitude quaternion at s = h; E_end (nm, 3) complex receives the oscillating part of
     each mode at s = h. ``R`` is R0 (body → case), ``A`` (P, 3) the case phasors a_p = (Bre − iBim)e^{iν s},
     EO (P,) = e^{iν_p h}. Every exponential of the step is a product of e^{iν_p h}, e^{iΩ_p h}, e^{iΩ_r h}
-    and e^{−h/τ_n} (EZ[k] = e^{Z[k] h}): a few exp calls a pass, not three per term. ``precess`` False: K1 is not
-    made and out[15] takes ∫(h − s)N along e_a without the precession's part (K1's): a pass whose K1 and out[15]
-    serve only Ω_r = (1/J_a − 1/J_t) L̄_a, which is zero for an isotropic body whatever L̄_a (its first two
-    passes: two thirds of their ∫ terms, the same bits). ``k1_part``: which of K1's rows the pass makes
+    and e^{−h/τ_n} (EZ[k] = e^{Z[k] h}): a few exp calls a pass, not three per term. The moment's terms X[k]
+    e^{Z[k] s} come in families of three (m3 = −1, 0, 1), whose products with the field share five ∫
+    (:func:`_family`); from :data:`MODE_SUM_MIN` modes on, the modes' free-decay terms are summed over the modes
+    before those products (:func:`_decay_sums`; X[k + n] then holds D_n, EZ[k + n] e^{−h/τ_n}). ``precess`` False:
+    K1 is not made and out[15] takes ∫(h − s)N along e_a without the precession's part (K1's): a pass whose K1 and
+    out[15] serve only Ω_r = (1/J_a − 1/J_t) L̄_a, which is zero for an isotropic body whatever L̄_a (its first two
+    passes: two fifths of their ∫). ``k1_part``: which of K1's rows the pass makes
     (:data:`K1_MEAN`, :data:`K1_END`, :data:`K1_BOTH`): each pass reads only one of them (the predictors K1[1],
-    through out[15]; the last K1[0]), and each costs a third of the torque terms' work (the row left out stays zero;
-    without K1[1], out[15] is NaN). Without K1_END (a predictor) the pass also leaves out what only the step's end
-    reads: out[0:3] (∫N ds) stays zero and E_end is not made."""
+    through out[15]; the last K1[0]; the row left out stays zero; without K1[1], out[15] is NaN). Without K1_END
+    (a predictor) the pass also leaves out what only the step's end reads: out[0:3] (∫N ds) stays zero and E_end is
+    not made."""
     P = om.shape[0]
     end = (k1_part & K1_END) != 0  # (the pass whose ∫N, modes and K1[0] the step's end reads)
     Ln = math.sqrt(Lx * Lx + Ly * Ly + Lz * Lz)
@@ -242,16 +398,21 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 f = om[p] - m1 * Op - m2 * Or
                 chi = -tail * 1j * f
                 ef = EO[p] * _epow(Ep, -m1) * _epow(Er, -m2)  # e^{ifh}
+                ff2 = f * f
                 for n in range(nm):
-                    g = -1j * f / (lam[n] + 1j * f)  # mode n's particular solution is Re(g b e^{ifs})
+                    # mode n's particular solution is Re(g b e^{ifs}), g = −if/(1/τ_n + if) (in real arithmetic)
+                    ln = lam[n]
+                    dn = 1.0 / (ln * ln + ff2)
+                    g = complex(-ff2 * dn, -f * ln * dn)
                     chi += w[n] * g
                     S[n, 0] += g * c0
                     S[n, 1] += g * c1
                     S[n, 2] += g * c2
                     if end:  # (the modes' state at s = h: the step's end reads the last pass's)
-                        E_end[n, 0] += g * c0 * ef
-                        E_end[n, 1] += g * c1 * ef
-                        E_end[n, 2] += g * c2 * ef
+                        ge = g * ef
+                        E_end[n, 0] += ge * c0
+                        E_end[n, 1] += ge * c1
+                        E_end[n, 2] += ge * c2
                 chi *= c_m
                 u0 += chi * c0
                 u1 += chi * c1
@@ -265,10 +426,16 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 Z[k] = 1j * (om[p] + (m3 - m1) * Op)
                 EZ[k] = EO[p] * _epow(Ep, m3 - m1)
                 k += 1
-    # free decay of each mode's mismatch with its particular solution: D_n e^{−s/τ_n} (body, real)
+    # free decay of each mode's mismatch with its particular solution: D_n e^{−s/τ_n} (body, real), seen from the
+    # case as Σ_{m2,m3} P_m3(l̂) R0 P_m2(e_a) D_n e^{(−1/τ_n + i(m3 Ω_p + m2 Ω_r))s}
+    summed = nm >= MODE_SUM_MIN
     for n in range(nm):
         d0, d1, d2 = _mode_mismatch(y, S, n, c_m * w[n])
         dec = math.exp(-lam[n] * h)
+        if summed:  # (D_n and e^{−h/τ_n} for _decay_sums: the rows past the forced terms')
+            X[k + n, 0], X[k + n, 1], X[k + n, 2] = d0, d1, d2
+            EZ[k + n] = dec
+            continue
         for m2 in range(-1, 2):
             e0 = 1.0 if ax == 0 else 0.0
             e1 = 1.0 if ax == 1 else 0.0
@@ -283,31 +450,21 @@ def _flow_pass(Lx, Ly, Lz, La, y, R, s, h, Bre, Bim, om, Jt, Ja, ax, lam, w, c_m
                 EZ[k] = dec * _epow(Ep, m3) * _epow(Er, m2)
                 k += 1
     # N = m_c × B_c with B_c = ½ Σ_q (a_q e^{iν_q s} + conj): ∫ and ∫(h − s) of each product, and with
-    # K1[0] = ∫ N e^{−iΩ_p s} ds and K1[1] = ∫ (h − s) N e^{−iΩ_p s} ds (the torque seen from the precession)
+    # K1[0] = ∫ N e^{−iΩ_p s} ds and K1[1] = ∫ (h − s) N e^{−iΩ_p s} ds (the torque seen from the precession). The
+    # terms come in families of three, m3 = −1, 0, 1, whose exponents differ by iΩ_p; N e^{−iΩ_p s} shifts them by
+    # one: a family's ∫ at the five shifts μ = −2 … 2 serve all its products (_family)
     for j in range(6):
         out[j] = 0.0
     for j in range(3):
         K1[0, j] = 0.0
         K1[1, j] = 0.0
-    for j in range(k):
-        x0, x1, x2 = X[j, 0], X[j, 1], X[j, 2]
+    for f in range(k // 3):
         for q in range(P):
             for sg in range(2):
-                a0, a1, a2, zq, ezq = _field_half(A, q, sg, Z[j], EZ[j], om[q], EO[q])
-                n0, n1, n2 = _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out, end)
-                if not precess:
-                    continue
-                # N = ½ Σ (n e^{zs} + conj): each half times e^{−iΩ_p s}
-                k1, m1 = _integrals(zq - 1j * Op, ezq * Ep.conjugate(), h)
-                k2, m2 = _integrals(zq.conjugate() - 1j * Op, (ezq * Ep).conjugate(), h)
-                if k1_part & K1_END:
-                    K1[0, 0] += 0.5 * (n0 * k1 + n0.conjugate() * k2)
-                    K1[0, 1] += 0.5 * (n1 * k1 + n1.conjugate() * k2)
-                    K1[0, 2] += 0.5 * (n2 * k1 + n2.conjugate() * k2)
-                if k1_part & K1_MEAN:
-                    K1[1, 0] += 0.5 * (n0 * m1 + n0.conjugate() * m2)
-                    K1[1, 1] += 0.5 * (n1 * m1 + n1.conjugate() * m2)
-                    K1[1, 2] += 0.5 * (n2 * m1 + n2.conjugate() * m2)
+                _family(X, 3 * f, Z[3 * f + 1], EZ[3 * f + 1], A, q, sg, om[q], EO[q], Op, Ep, h, out, K1, end,
+                        precess, k1_part)
+    if summed:
+        _decay_sums(X, EZ, k, nm, lam, R, ax, l0, l1, l2, A, om, EO, Op, Or, Ep, Er, h, out, K1, end, precess, k1_part)
     # attitude: q(h) = q(l̂, Ω_p h) ⊗ q0 ⊗ q(e_a, Ω_r h)
     cp, sp = math.cos(0.5 * Op * h), math.sin(0.5 * Op * h)
     cr, sr = math.cos(0.5 * Or * h), math.sin(0.5 * Or * h)
