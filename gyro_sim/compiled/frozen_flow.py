@@ -156,13 +156,17 @@ def _field_half(A, q, sg, z, ez, om_q, eo_q):
 
 
 @njit(cache=True, inline="always")
+def _half_cross(x0, x1, x2, a0, a1, a2):
+    """½ x × a (complex 3-vectors)."""
+    return 0.5 * (x1 * a2 - x2 * a1), 0.5 * (x2 * a0 - x0 * a2), 0.5 * (x0 * a1 - x1 * a0)
+
+
+@njit(cache=True, inline="always")
 def _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out, end=True):
     """One product term of N = m × B, ½ x × a e^{zq s} (N·m): adds its ∫0^h to out[0:3] (only with ``end``: a
     pass whose ∫N the step's end reads) and its ∫0^h (h − s) to out[3:6]; returns ½ x × a."""
     i1, i2 = _integrals(zq, ezq, h)
-    n0 = 0.5 * (x1 * a2 - x2 * a1)
-    n1 = 0.5 * (x2 * a0 - x0 * a2)
-    n2 = 0.5 * (x0 * a1 - x1 * a0)
+    n0, n1, n2 = _half_cross(x0, x1, x2, a0, a1, a2)
     if end:
         out[0] += (n0 * i1).real
         out[1] += (n1 * i1).real
@@ -184,6 +188,12 @@ def _epow(E, k):
     if k == 2:
         return E * E
     return (E * E).conjugate()
+
+
+#: what a pass of the frozen-flow step makes of K1 (the torque seen from the precession, _flow_pass): K1[1], which
+#: only the axial mean moment out[15] reads (the predictor passes: the next pass's Ω_r), K1[0], which only the step's
+#: end reads (the last pass), or both
+K1_MEAN, K1_END, K1_BOTH = 1, 2, 3
 
 
 @njit(cache=True, inline="always")
@@ -223,12 +233,6 @@ def _add_product(n0, n1, n2, i1, i2, lo1, lo2, hi1, hi2, out, K1, end, precess, 
         K1[1, 0] += 0.5 * (n0 * lo2 + (n0 * hi2).conjugate())
         K1[1, 1] += 0.5 * (n1 * lo2 + (n1 * hi2).conjugate())
         K1[1, 2] += 0.5 * (n2 * lo2 + (n2 * hi2).conjugate())
-
-
-@njit(cache=True, inline="always")
-def _half_cross(x0, x1, x2, a0, a1, a2):
-    """½ x × a (complex 3-vectors)."""
-    return 0.5 * (x1 * a2 - x2 * a1), 0.5 * (x2 * a0 - x0 * a2), 0.5 * (x0 * a1 - x1 * a0)
 
 
 @njit(cache=True, inline="always")
@@ -337,12 +341,6 @@ def _seen(m, l0, l1, l2, W0, W1, W2, a0, a1, a2, cj):
     if cj:
         return n0.conjugate(), n1.conjugate(), n2.conjugate()
     return n0, n1, n2
-
-
-#: what a pass of the frozen-flow step makes of K1 (the torque seen from the precession, _flow_pass): K1[1], which
-#: only the axial mean moment out[15] reads (the predictor passes: the next pass's Ω_r), K1[0], which only the step's
-#: end reads (the last pass), or both
-K1_MEAN, K1_END, K1_BOTH = 1, 2, 3
 
 
 @njit(cache=True)
