@@ -167,6 +167,13 @@ def _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out, end=True):
     pass whose ∫N the step's end reads) and its ∫0^h (h − s) to out[3:6]; returns ½ x × a."""
     i1, i2 = _integrals(zq, ezq, h)
     n0, n1, n2 = _half_cross(x0, x1, x2, a0, a1, a2)
+    _add_integrals(n0, n1, n2, i1, i2, out, end)
+    return n0, n1, n2
+
+
+@njit(cache=True, inline="always")
+def _add_integrals(n0, n1, n2, i1, i2, out, end):
+    """out[0:3] += Re(n i1) (only with ``end``), out[3:6] += Re(n i2): a product term n e^{zs}'s ∫ and ∫(h − s)."""
     if end:
         out[0] += (n0 * i1).real
         out[1] += (n1 * i1).real
@@ -174,7 +181,6 @@ def _torque_term(x0, x1, x2, a0, a1, a2, zq, ezq, h, out, end=True):
     out[3] += (n0 * i2).real
     out[4] += (n1 * i2).real
     out[5] += (n2 * i2).real
-    return n0, n1, n2
 
 @njit(cache=True, inline="always")
 def _epow(E, k):
@@ -216,13 +222,7 @@ def _add_product(n0, n1, n2, i1, i2, lo1, lo2, hi1, hi2, out, K1, end, precess, 
     """Add one product term n e^{zs} (n = ½ x × a, N·m) of the torque: its ∫ (i1: only with ``end``) and
     ∫(h − s) (i2) to out[0:6], and to K1 the precession's view of it, ½(n e^{zs} + conj) e^{−iΩ_p s}: n times the ∫
     one shift below (lo1, lo2) and the conjugate of n times the ∫ one shift above (hi1, hi2)."""
-    if end:
-        out[0] += (n0 * i1).real
-        out[1] += (n1 * i1).real
-        out[2] += (n2 * i1).real
-    out[3] += (n0 * i2).real
-    out[4] += (n1 * i2).real
-    out[5] += (n2 * i2).real
+    _add_integrals(n0, n1, n2, i1, i2, out, end)
     if not precess:
         return
     if k1_part & K1_END:
