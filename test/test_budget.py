@@ -27,9 +27,11 @@ from gyro_sim.scenes.scene import SceneError, load_scene
 from gyro_sim.scenes.step_control import STEP_BUDGET, StepBudgetError
 
 GYRO_SIM = [sys.executable, "-m", "gyro_sim.apps.cli"]
-#: wall s from SIGINT to the end of the process, summary of the bag and its plot included (a loaded machine; the
-#: goal is 2 s idle: measured 0.04-0.06 s to the interrupt in-process, 2.2 s to the CLI's exit with its summary)
-SIGINT_BOUND = 10.0
+#: wall s from SIGINT to the end of the process, summary of the bag and its plot included: a hang guard on a loaded
+#: machine (the defect it guards ignored SIGINT for minutes), not the goal, 2 s idle (measured 0.04-0.06 s to the
+#: interrupt in-process, 2.2 s to the CLI's exit with its summary). 10 s failed once with two whole suites running
+#: side by side on 2 cores (13.9 s, 2026-11-29: the summary and plot are CPU work shared four ways)
+SIGINT_BOUND = 30.0
 
 ABSURD = """\
 name: absurd_inertia
