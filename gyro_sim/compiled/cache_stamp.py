@@ -31,9 +31,10 @@ STAMPED = ("gyro_sim/compiled/*.py", "gyro_sim/engine/ticks.py")
 KERNEL_SOURCES = STAMPED + ("gyro_ctl/law_kernels.py", "gyro_sim/physics/constants.py")
 
 
-def kernel_sources(root: Path = _ROOT) -> list[Path]:
-    """The files of :data:`KERNEL_SOURCES` under ``root`` that exist (resolved: a symlinked install's sources)."""
-    return [p.resolve() for pattern in KERNEL_SOURCES for p in sorted(root.glob(pattern)) if p.is_file()]
+def kernel_sources(root: Path = _ROOT, patterns: tuple = KERNEL_SOURCES) -> list[Path]:
+    """The files of ``patterns`` (:data:`KERNEL_SOURCES`) under ``root`` that exist (resolved: a symlinked install's
+    sources)."""
+    return [p.resolve() for pattern in patterns for p in sorted(root.glob(pattern)) if p.is_file()]
 
 
 @functools.lru_cache(maxsize=None)
@@ -54,7 +55,7 @@ def stamp(root: Path = _ROOT) -> str:
 @functools.lru_cache(maxsize=None)
 def _ours() -> frozenset:
     """The files whose kernels take the stamp (:data:`STAMPED`)."""
-    return frozenset(str(p.resolve()) for pattern in STAMPED for p in _ROOT.glob(pattern) if p.is_file())
+    return frozenset(str(p) for p in kernel_sources(patterns=STAMPED))
 
 
 def _stamped(base: type) -> type:
