@@ -34,7 +34,14 @@ KERNEL_SOURCES = STAMPED + ("gyro_ctl/law_kernels.py", "gyro_sim/physics/constan
 def kernel_sources(root: Path = _ROOT, patterns: tuple = KERNEL_SOURCES) -> list[Path]:
     """The files of ``patterns`` (:data:`KERNEL_SOURCES`) under ``root`` that exist (resolved: a symlinked install's
     sources)."""
-    return [p.resolve() for pattern in patterns for p in sorted(root.glob(pattern)) if p.is_file()]
+    return list(_sources(root, patterns))
+
+
+@functools.lru_cache(maxsize=None)
+def _sources(root: Path, patterns: tuple) -> tuple:
+    """:func:`kernel_sources`, globbed once a process (a run loads each kernel's cache under the stamp, ~80 times:
+    globbing each time cost ~50 ms of a first run's start-up; a file's content is still read again when it changes)."""
+    return tuple(p.resolve() for pattern in patterns for p in sorted(root.glob(pattern)) if p.is_file())
 
 
 @functools.lru_cache(maxsize=None)
