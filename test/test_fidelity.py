@@ -55,6 +55,30 @@ def test_averaged_error_falls_with_mu():
     assert errs[0][0] > errs[1][0] > errs[2][0] and errs[0][1] > errs[1][1] > errs[2][1]
 
 
+def test_the_error_control_checks_after_an_averaged_stretch(monkeypatch):
+    """constant_field under ``auto``: [M]'s averaged model to 6.87 s, then the full model to 60 s. The check instants
+    inside the averaged stretch were never reached, and the error control waited for the first of them (0.0146 s)
+    to the end: none of the full stretch's 14 checks was made, its step never controlled (10 627 steps) and its
+    error measured at the end alone. Now the checks passed in the stretch are passed over, and the full stretch is
+    checked (2 604 steps, the same errors against the full model: test_auto_runs_m_averaged_model_and_hands_back)."""
+    from gyro_sim.scenes.step_control import ErrorControl
+
+    made = []
+    check = ErrorControl.check
+
+    def spy(self, t, *args, **kw):
+        made.append(t)
+        return check(self, t, *args, **kw)
+
+    monkeypatch.setattr(ErrorControl, "check", spy)
+    hy = gyro_sim.run(gyro_sim.load_scene("constant_field", overrides={**LOOSE, "fidelity": "auto"}))
+    (t0, t1), = hy.averaged_segments
+    after = [t for t in made if t > t1]
+    print(f"\n  averaged {t0:g}–{t1:.3f} s; {len(after)} checks after it, {hy.steps} steps; {hy.error_estimate.text()}")
+    assert t1 < 10.0 and len(after) >= 13  # (the instants k T/16 past 6.87 s: 7.5 … 56.25 s)
+    assert hy.error_estimate.met
+
+
 def test_averaged_refuses_a_scene_outside_its_region():
     with pytest.raises(gyro_sim.SceneError, match=r"fidelity = 'averaged'.*μ = .* > 0.001"):
         gyro_sim.run(spinup(fidelity="averaged", **{"initial.spin": 20.0}))
