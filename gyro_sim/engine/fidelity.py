@@ -308,21 +308,21 @@ def _averaged_stretch_if_any(r: Runner, law, switched: set, cmd_times: list, seg
     k, why = averaged_region(r)
     if k is not None:
         r.estimator.averaged_eps.append(_model(r, k).mu(float(np.linalg.norm(r.sim.y[0:3]))))
-        r.estimator.sync_shadow()  # (the shadow reaches the stretch's start: it takes up again from its end)
+        r.estimator.hold_shadow()  # (the shadow reaches the stretch's start, compared: it takes up again from its end)
         n = _averaged_stretch(r, k, cmd_times, segments)
         r.estimator.resync_shadow()
         return n, "spin-up", False, ""
     m, why_m = m_region(r)
     if m is not None:
         r.estimator.averaged_eps.append(mu_max(r))  # (the region's bound: [M]'s μ_eff at entry is below it)
-        r.estimator.sync_shadow()
+        r.estimator.hold_shadow()
         n, edge = _m_stretch(r, m, cmd_times, segments)
         r.estimator.resync_shadow()
         return n, "[M]", edge, ""
     kk, why_k = k_region(r)
     if kk is not None:
         r.estimator.averaged_eps.append(kk.eps_ratio(slow_k_state(r.sim)) * kk.mu_max)
-        r.estimator.sync_shadow()
+        r.estimator.hold_shadow()
         n, edge = _k_stretch(r, kk, cmd_times, segments)
         r.estimator.resync_shadow()
         return n, "[K]", edge, ""

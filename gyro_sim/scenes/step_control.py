@@ -508,12 +508,14 @@ class ErrorControl:
         running maxima at :attr:`denom_estimate`."""
         return (self.est[0] / self.L_max if self.L_max > 0 else 0.0), self.est[1], self.est[2]
 
-    def bank(self) -> None:
-        """Keep the errors so far (the shadow is about to be set to the run's state: a fidelity hand-over)."""
+    def bank(self, t: float) -> None:
+        """Keep the errors so far (the shadow is about to be set to the run's state at ``t`` s: a fidelity
+        hand-over): the differences grow afresh from zero at ``t``, and the PI control's memory starts over."""
         self.banked = (self.dL, self.e_q, self.e_p)
         self.banked_est = self.est
-        self.prev = None
+        self.prev = (t, 0.0, 0.0, 0.0, 0.0)
         self.dLn = 0.0
+        self.rho_prev = self.div_prev = self.growth_prev = None
 
     def coarsest(self, main, method: str) -> float:
         """The least step_div the stepper may take: its knob no coarser than SPT_MIN / RATE_CHANGE_CONTROL_MAX (the
