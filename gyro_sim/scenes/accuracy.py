@@ -92,6 +92,7 @@ from gyro_sim.scenes.step_control import (  # noqa: F401  (the names of the accu
     STIFF_ORDER,
     STIFF,
     COARSE_ORDER,
+    ESTIMATE_ORDER,
     SHADOW_RATIO,
     CHECKS,
     R_MEASURABLE,

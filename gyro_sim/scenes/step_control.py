@@ -238,6 +238,12 @@ STIFF = "etdrk4 (stiff)"
 #: d/(2^8 − 1) was 1.6x below drift_sources' true L error; below the least measured, with a margin (docs/accuracy.md,
 #: "Floors"). The step control keeps ORDER (its decisions as they were)
 COARSE_ORDER = {"lawson8": 6.5}
+#: the estimate's order of the free stepper's stretches (a triaxial rotor's: the axisymmetric one's are exact), whose
+#: shadow takes 8 to 16 steps a turn (ErrorControl.coarsest): on free_rotor its error fell as h^7.59 from 8 to 16
+#: steps a turn (5.58e-5 against 2.90e-7 rad over 10 s, the same ratio over 40 s) and as h^7.95 from 16 to 32, so
+#: d/(2^8 − 1) was 0.75 of the run's error there, and the runs' estimates 0.94 (40 s) and 0.98 (100 s) of it at 1 Hz
+#: output; below the least measured, with a margin, as COARSE_ORDER. The step control keeps ORDER
+ESTIMATE_ORDER = {"free": 7.0}
 #: how much longer the shadow run's steps are, per stepper (its cost: 1/R of the run's)
 SHADOW_RATIO = {"lawson8": 2.0, "etdrk4": 2.0, "frozen_flow": 2.0, "free": 2.0, "qs_flow": 2.0}
 #: the instants (fractions of the duration) where a run compares itself with its shadow and may change its step:
@@ -424,7 +430,8 @@ class ErrorControl:
                 acc += k / (r ** p - 1.0)
                 r = max(min(r, k / max(shadow_len.get(m, k), 1)), R_MEASURABLE)
                 kc = min(self.coarse.get(m, 0), k)
-                acc_e += (k - kc) / (r ** p - 1.0) + (kc / (r ** COARSE_ORDER[m] - 1.0) if kc else 0.0)
+                pe = ESTIMATE_ORDER.get(m, p)
+                acc_e += (k - kc) / (r ** pe - 1.0) + (kc / (r ** COARSE_ORDER[m] - 1.0) if kc else 0.0)
                 n += k
         for (m, f), k in self.finer.items():
             x = k / (1.0 - f ** -ORDER.get(m, STIFF_ORDER))
