@@ -247,7 +247,8 @@ class ErrorEstimator:
         if self.shadow is None:
             return
         self.sync_shadow()
-        self.control.measure(self.sim, self.shadow)
+        if self.shadow.t == self.sim.t:  # (both at one instant: the differences are errors)
+            self.control.measure(self.sim, self.shadow)
 
     def resync_shadow(self) -> None:
         """The run's state was set from outside (a fidelity hand-over, after :meth:`hold_shadow`): keep the errors
