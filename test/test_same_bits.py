@@ -10,7 +10,7 @@ import pytest
 from gyro_sim.engine.simulator import Simulator
 from gyro_sim.physics.frames import attitude_split, attitude_split_one, cross_rows
 from gyro_sim.scenes.scene import load_scene, merge_times
-from gyro_sim.scenes.step_control import COARSE_ORDER, ORDER, R_MEASURABLE, STIFF_ORDER, ErrorControl
+from gyro_sim.scenes.step_control import COARSE_ORDER, ESTIMATE_ORDER, ORDER, R_MEASURABLE, STIFF_ORDER, ErrorControl
 
 
 def _bits(x) -> bytes:
@@ -27,10 +27,12 @@ def _ref_denom(ctl, lengths: bool) -> float:
         r = k / max(ctl.shadow_steps.get(m, k), 1)
         if r >= R_MEASURABLE:
             p = ORDER.get(m, STIFF_ORDER)
-            if lengths:  # (the stretches whose shadow was below SPT_MIN at COARSE_ORDER)
+            if lengths:  # (the stretches whose shadow was below SPT_MIN at COARSE_ORDER; the free stepper's at
+                # ESTIMATE_ORDER)
                 r = max(min(r, k / max(ctl.shadow_len.get(m, k), 1)), R_MEASURABLE)
                 kc = min(ctl.coarse.get(m, 0), k)
-                acc += (k - kc) / (r ** p - 1.0) + (kc / (r ** COARSE_ORDER[m] - 1.0) if kc else 0.0)
+                pe = ESTIMATE_ORDER.get(m, p)
+                acc += (k - kc) / (r ** pe - 1.0) + (kc / (r ** COARSE_ORDER[m] - 1.0) if kc else 0.0)
             else:
                 acc += k / (r ** p - 1.0)
             n += k
