@@ -5,6 +5,7 @@ import pytest
 from gyro_sim.engine.simulate import run
 from gyro_sim.physics.frames import attitude_split, symmetry_axis
 from gyro_sim.scenes.scene import load_scene
+from test_free_rotor import attitude_error  # (against the Jacobi solution)
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +69,7 @@ def test_the_free_stepper_keeps_its_coarsest_step(rate, most):
     attitude's difference at 16 of its 23 checks, swung step_div 1.38 → 0.69 → 1.03 → 0.51 → 0.93 and the run ended
     at 2.3e-6 rad against its 1e-6 (480 steps; estimate 4.3e-6, not met). Against the Jacobi solution."""
     r = run(load_scene("free_rotor", overrides={"output.rate": rate}))
-    err = _free_rotor_error(r)
+    err = attitude_error(r)
     est = r.error_estimate
     print(f"\nfree_rotor, {rate:g} Hz samples: {r.steps} steps; true attitude {err:.2e} rad, estimate "
           f"{est.attitude:.2e}")
@@ -84,21 +85,10 @@ def test_the_free_steppers_estimate_allows_for_its_order_at_eight_steps_a_turn()
     attitude error (3.39e-7 against 3.60e-7 rad; 0.98 over 100 s). Its stretches are now estimated at
     ESTIMATE_ORDER (7); the steps are the same (the control keeps ORDER). Against the Jacobi solution."""
     r = run(load_scene("free_rotor", overrides={"output.rate": 1.0, "duration": 40.0}))
-    err = _free_rotor_error(r)
+    err = attitude_error(r)
     est = r.error_estimate
     print(f"\nfree_rotor, 1 Hz, 40 s: {r.steps} steps; true attitude {err:.2e} rad, estimate {est.attitude:.2e}")
     assert err <= est.attitude <= 10 * err and est.met
-
-
-def _free_rotor_error(r) -> float:
-    """The largest angle (rad) between run ``r``'s attitude and the Jacobi solution from its first sample."""
-    from gyro_sim.physics.closed_forms import free_rigid_body
-    from gyro_sim.physics.frames import quat_to_matrix
-
-    R = quat_to_matrix(r.q)
-    _, Rx = free_rigid_body(r.scene.inertia, R[0], r.L[0], r.t)
-    d = np.linalg.norm(R - Rx, axis=(1, 2)) / (2 * np.sqrt(2))  # (2√2 sin(angle/2))
-    return float(np.max(2 * np.arcsin(np.clip(d, 0, 1))))
 
 
 def _true_errors(r, ref) -> tuple[float, float, float]:

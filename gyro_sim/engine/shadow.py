@@ -155,10 +155,7 @@ class ErrorEstimator:
         take the same steps in both)."""
         sim, sh = self.sim, self.shadow
         assert sh is not None
-        checks = self._checks
-        while self._ck < checks.size and checks[self._ck] < tb:  # (passed in an averaged stretch: fidelity.py)
-            self._ck += 1
-        at_check = self._ck < checks.size and tb == checks[self._ck]
+        at_check = self._ck < self._checks.size and tb == self._checks[self._ck]
         if self._lazy:
             if not (at_check or tb >= self.T):
                 return
@@ -252,7 +249,8 @@ class ErrorEstimator:
 
     def resync_shadow(self) -> None:
         """The run's state was set from outside (a fidelity hand-over, after :meth:`hold_shadow`): keep the errors
-        so far and start the shadow, and the error control's growth, afresh from the run's state and time. (It
+        so far and start the shadow, and the error control's growth, afresh from the run's state and time; the next
+        check is the first after it (the error control waited for one inside the stretch to the run's end). (It
         compared the run at the stretch's end with the shadow at its start: the default scene under ``auto``, averaged
         from 6.4 s to its end, reported the spin-up over those 54 s as the steps' error, L 0.88.)"""
         if self.shadow is None:
@@ -260,6 +258,9 @@ class ErrorEstimator:
         sim, sh = self.sim, self.shadow
         self.control.bank(sim.t)
         self._at_check = (sim.y[0:3].copy(), sim.t, sim.steps, sh.steps)
+        # (the check instants the stretch passed are not breaks the run reaches: its next check is the first after,
+        # past round-off as the runner's next break is: fidelity._jump)
+        self._ck = int(np.searchsorted(self._checks, sim.t + 1e-12 * max(1.0, sim.t), side="right"))
         sh.y[:] = sim.y
         sh.t, sh.phase, sh.current, sh.rate = sim.t, sim.phase.copy(), sim.current.copy(), sim.rate.copy()
         sh._nu_max = sim._nu_max
